@@ -1,0 +1,3 @@
+from rd_pipeline.cli import entry_point
+
+entry_point()

@@ -1,0 +1,1 @@
+"""Artifacts and the DAG: content keys, the atomic store, stage specs and the runner."""

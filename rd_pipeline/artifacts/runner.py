@@ -1,0 +1,248 @@
+"""The DAG runner: plan the stages for one (robot, motion), compute keys, run what is not cached."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+
+from rd_pipeline import __version__, paths
+from rd_pipeline.artifacts.keys import artifact_key, file_sha256
+from rd_pipeline.artifacts.stage import Stage, StageContext, build_params
+from rd_pipeline.artifacts.store import ArtifactRef, ArtifactStore, write_manifest
+from rd_pipeline.errors import PipelineError
+
+SOURCES = ("bvh", "csv")
+
+
+@dataclass(frozen=True)
+class PlannedStage:
+    """A stage with everything that determines its artifact key."""
+
+    stage: Stage
+    """The stage."""
+    params: Any
+    """Its resolved params."""
+    inputs: dict[str, Path]
+    """External input files by label."""
+    input_hashes: dict[str, str]
+    """sha256 of each input file."""
+    upstream: dict[str, str]
+    """Upstream stage name -> key."""
+    key: str
+    """The artifact key."""
+
+
+@dataclass(frozen=True)
+class StageOutcome:
+    """What happened to one stage in a run."""
+
+    name: str
+    """Stage name."""
+    key: str
+    """Artifact key."""
+    path: Path
+    """Artifact folder."""
+    cached: bool
+    """True when the artifact already existed and no work was done."""
+    seconds: float
+    """Wall time spent, including the cache check."""
+
+
+@dataclass(frozen=True)
+class Pipeline:
+    """The stages of one run: a registry, a robot, a motion, a source, params."""
+
+    registry: tuple[Stage, ...]
+    """All stages that exist."""
+    robot: str | None
+    """Robot name; stages that are per robot need one."""
+    motion: str
+    """Motion name."""
+    source: str
+    """`bvh` or `csv`."""
+    param_values: dict[str, dict[str, Any]]
+    """Stage name -> param overrides (profile, params file and `--set`, already layered)."""
+
+    def chain(self) -> list[Stage]:
+        """Stages of this source in dependency order (registry order breaks ties)."""
+        candidates = [s for s in self.registry if s.source in (None, self.source)]
+        ordered: list[Stage] = []
+        provided: set[str] = set()
+        progress = True
+        while progress:
+            progress = False
+            for stage in candidates:
+                if stage not in ordered and all(role in provided for role in stage.requires):
+                    ordered.append(stage)
+                    provided.add(stage.provides)
+                    progress = True
+        return ordered
+
+    def select(self, start: str | None, until: str | None, only: str | None) -> tuple[list[Stage], list[Stage]]:
+        """(stages to run, upstream stages that must already be cached)."""
+        chain = self.chain()
+        names = [s.name for s in chain]
+        for option, value in (("--from", start), ("--until", until), ("--only", only)):
+            if value is None:
+                continue
+            if value not in {s.name for s in self.registry}:
+                known = ", ".join(s.name for s in self.registry)
+                raise PipelineError(f"{option}: unknown stage '{value}' (stages: {known})")
+            if value not in names:
+                raise PipelineError(
+                    f"{option}: stage '{value}' is not in the {self.source} pipeline for "
+                    f"{self.robot}/{self.motion} (stages: {', '.join(names)})"
+                )
+        if only is not None:
+            start = until = only
+        first = names.index(start) if start else 0
+        last = names.index(until) if until else len(chain) - 1
+        if first > last:
+            raise PipelineError(f"--from {start} comes after --until {until}")
+        return chain[first : last + 1], chain[:first]
+
+    def plan(self, stages: list[Stage]) -> list[PlannedStage]:
+        """Keys for `stages` (which must include their upstream, in order)."""
+        planned: list[PlannedStage] = []
+        by_role: dict[str, PlannedStage] = {}
+        for stage in stages:
+            if stage.per_robot and not self.robot:
+                raise PipelineError(f"stage '{stage.name}' needs --robot")
+            params = build_params(stage, self.param_values.get(stage.name, {}))
+            inputs = stage.inputs(self.robot if stage.per_robot else None, self.motion)
+            for label, path in inputs.items():
+                paths.require_file(path, f"input '{label}' of stage {stage.name}")
+            hashes = {label: file_sha256(path) for label, path in sorted(inputs.items())}
+            upstream = {by_role[role].stage.name: by_role[role].key for role in stage.requires}
+            key = artifact_key(stage.name, stage.version, dataclasses.asdict(params), upstream, hashes)
+            entry = PlannedStage(stage, params, inputs, hashes, upstream, key)
+            planned.append(entry)
+            by_role[stage.provides] = entry
+        return planned
+
+
+def resolve_source(robot: str | None, motion: str, forced: str | None) -> str:
+    """`bvh` when the raw BVH exists, else `csv` when the robot's retargeted CSV exists."""
+    if forced is not None:
+        if forced not in SOURCES:
+            raise PipelineError(f"--source must be one of {', '.join(SOURCES)}, got '{forced}'")
+        return forced
+    if paths.bvh_path(motion).is_file():
+        return "bvh"
+    csv = paths.csv_path(robot, motion) if robot else None
+    if csv is not None and csv.is_file():
+        return "csv"
+    where = f"{paths.bvh_path(motion)}" + (f" nor {csv}" if csv else " (and RD_RETARGETED_DIR is not set)")
+    raise PipelineError(f"no data for motion '{motion}': neither {where} exists")
+
+
+def execute(
+    pipeline: Pipeline, store: ArtifactStore, start: str | None = None, until: str | None = None,
+    only: str | None = None, force: bool = False, console: Console | None = None,
+) -> list[StageOutcome]:
+    """Run the selected stages; cached artifacts are reused without doing any work."""
+    console = console or Console(stderr=True)
+    selected, before = pipeline.select(start, until, only)
+    planned = pipeline.plan(before + selected)
+    refs: dict[str, ArtifactRef] = {}
+    outcomes: list[StageOutcome] = []
+    for entry in planned:
+        stage = entry.stage
+        robot = pipeline.robot if stage.per_robot else None
+        began = time.perf_counter()
+        existing = store.find(stage.name, robot, pipeline.motion, entry.key)
+        if entry.stage in before:
+            if existing is None:
+                raise PipelineError(
+                    f"upstream stage '{stage.name}' has no artifact {entry.key} for {_label(robot, pipeline.motion)}; "
+                    f"run it first (drop --from/--only)"
+                )
+            refs[stage.provides] = existing
+            continue
+        if existing is not None and not force:
+            refs[stage.provides] = existing
+            seconds = time.perf_counter() - began
+            console.print(f"[green]cached[/] {stage.name:<9} {_label(robot, pipeline.motion)}  {entry.key}  ({seconds:.2f} s, no work)")
+            outcomes.append(StageOutcome(stage.name, entry.key, existing.path, True, seconds))
+            continue
+        console.print(f"[cyan]run[/]    {stage.name:<9} {_label(robot, pipeline.motion)}  {entry.key}")
+        ref = _run_stage(pipeline, store, entry, refs, console, replace=existing is not None)
+        seconds = time.perf_counter() - began
+        console.print(f"[green]done[/]   {stage.name:<9} {_label(robot, pipeline.motion)}  {entry.key}  ({seconds:.2f} s) -> {ref.path}")
+        refs[stage.provides] = ref
+        outcomes.append(StageOutcome(stage.name, entry.key, ref.path, False, seconds))
+    return outcomes
+
+
+def _run_stage(
+    pipeline: Pipeline, store: ArtifactStore, entry: PlannedStage, refs: dict[str, ArtifactRef],
+    console: Console, replace: bool,
+) -> ArtifactRef:
+    stage = entry.stage
+    robot = pipeline.robot if stage.per_robot else None
+    store.remove_abandoned(stage.name, robot, pipeline.motion)
+    began = time.perf_counter()
+    with store.writing(stage.name, robot, pipeline.motion, entry.key, replace=replace) as out:
+        context = StageContext(
+            robot=robot, motion=pipeline.motion, params=entry.params, inputs=entry.inputs,
+            upstream={role: refs[role] for role in stage.requires}, out_dir=out, console=console,
+        )
+        metrics = stage.run(context)
+        write_manifest(out, {
+            "stage": stage.name,
+            "key": entry.key,
+            "robot": robot,
+            "motion": pipeline.motion,
+            "params": dataclasses.asdict(entry.params),
+            "inputs": {str(path): entry.input_hashes[label] for label, path in entry.inputs.items()},
+            "upstream": entry.upstream,
+            "code_version": code_version(),
+            "created_at": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "duration_s": round(time.perf_counter() - began, 3),
+            "metrics": metrics,
+        })
+    return ArtifactRef(stage.name, entry.key, store.folder(stage.name, robot, pipeline.motion) / entry.key)
+
+
+def _label(robot: str | None, motion: str) -> str:
+    return f"{robot}/{motion}" if robot else motion
+
+
+@lru_cache(maxsize=1)
+def code_version() -> str:
+    """`0.1.0+g<commit>` in a git checkout, else the package version."""
+    try:
+        commit = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=paths.PROJECT_ROOT, capture_output=True, text=True, timeout=5,
+        ).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        commit = ""
+    return f"{__version__}+g{commit}" if commit else __version__
+
+
+def stage_status(pipeline: Pipeline, store: ArtifactStore) -> list[dict[str, Any]]:
+    """Per stage of the chain: key, path and state (cached / stale / missing), or the reason there is no key."""
+    rows = []
+    chain = pipeline.chain()
+    for i, stage in enumerate(chain):
+        robot = pipeline.robot if stage.per_robot else None
+        row: dict[str, Any] = {"stage": stage.name, "robot": robot, "motion": pipeline.motion}
+        try:
+            entry = pipeline.plan(chain[: i + 1])[-1]
+        except PipelineError as exc:
+            rows.append({**row, "key": None, "path": None, "state": "missing", "reason": str(exc)})
+            continue
+        found = store.find(stage.name, robot, pipeline.motion, entry.key)
+        others = [k for k in store.keys(stage.name, robot, pipeline.motion) if k != entry.key]
+        state = "cached" if found else ("stale" if others else "missing")
+        path = store.folder(stage.name, robot, pipeline.motion) / entry.key
+        rows.append({**row, "key": entry.key, "path": str(path), "state": state, "other_keys": others})
+    return rows

@@ -1,0 +1,113 @@
+"""What a DAG stage is: a name, a version, typed params, the roles it needs and provides, a run function.
+
+Stages are connected by roles, not by names: `parse` provides `human_motion`, `retarget` needs it and
+provides `reference`, `import` provides `reference` from a CSV instead. The runner picks the stages
+of one source and orders them by these roles, so adding a stage never touches the runner.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from rd_pipeline.artifacts.store import ArtifactRef
+from rd_pipeline.errors import PipelineError
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class StageContext:
+    """What a stage's run function gets."""
+
+    robot: str | None
+    """Robot name (None for robot-independent stages)."""
+    motion: str
+    """Motion name."""
+    params: Any
+    """The stage's frozen params dataclass."""
+    inputs: dict[str, Path]
+    """External input files by label."""
+    upstream: dict[str, ArtifactRef]
+    """Upstream artifacts by the role they provide."""
+    out_dir: Path
+    """Temporary folder to write into; it becomes the artifact when the stage returns."""
+    console: Console = field(default_factory=Console)
+    """Where progress and messages go."""
+
+    def track(self, items: Iterable[T], total: int, description: str) -> Iterator[T]:
+        """Iterate with a progress bar (ETA included) for long loops."""
+        columns = (TextColumn("  {task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                   TimeElapsedColumn(), TimeRemainingColumn())
+        with Progress(*columns, console=self.console, transient=True) as progress:
+            task = progress.add_task(description, total=total)
+            for item in items:
+                yield item
+                progress.advance(task)
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One DAG stage."""
+
+    name: str
+    """Name on the command line and in artifact paths."""
+    version: int
+    """Bump when the code changes what the stage writes; part of the artifact key."""
+    description: str
+    """One line for `--help` and `status`."""
+    params: type
+    """Frozen dataclass of the stage's parameters (defaults = the embedded profile)."""
+    provides: str
+    """Role of the artifact it writes."""
+    run: Callable[[StageContext], dict[str, Any]]
+    """Writes files into `ctx.out_dir` and returns the manifest's metrics."""
+    inputs: Callable[[str | None, str], dict[str, Path]] = lambda robot, motion: {}
+    """(robot, motion) -> external input files by label (hashed into the key)."""
+    requires: tuple[str, ...] = ()
+    """Roles of the upstream artifacts it reads."""
+    source: str | None = None
+    """For head stages: the raw-data source they read (`bvh` or `csv`)."""
+    per_robot: bool = True
+    """Whether artifacts are per robot (`<stage>/<robot>/<motion>`) or shared (`<stage>/<motion>`)."""
+
+
+def build_params(stage: Stage, values: dict[str, Any]) -> Any:
+    """The stage's params dataclass from defaults overridden by `values`, each checked against its type."""
+    known = {f.name: f for f in dataclasses.fields(stage.params)}
+    kwargs = {}
+    for name, value in values.items():
+        if name not in known:
+            raise PipelineError(
+                f"unknown parameter '{stage.name}.{name}' (known: {', '.join(known) or 'none'})"
+            )
+        kwargs[name] = _coerce(f"{stage.name}.{name}", value, known[name].default)
+    return stage.params(**kwargs)
+
+
+def _coerce(name: str, value: Any, default: Any) -> Any:
+    """Make `value` (possibly a string from `--set`) the type of the default, or say why not."""
+    kind = type(default)
+    if isinstance(value, str) and kind is not str:
+        text = value.strip()
+        if kind is bool:
+            if text.lower() not in ("true", "false"):
+                raise PipelineError(f"parameter '{name}' must be true or false, got '{value}'")
+            return text.lower() == "true"
+        try:
+            value = int(text) if kind is int else float(text) if kind is float else value
+        except ValueError:
+            raise PipelineError(f"parameter '{name}' must be a {kind.__name__}, got '{value}'") from None
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    if kind is tuple and isinstance(value, list):
+        value = tuple(value)
+    if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
+        raise PipelineError(f"parameter '{name}' must be a {kind.__name__}, got {value!r}")
+    return value

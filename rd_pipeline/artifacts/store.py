@@ -1,0 +1,120 @@
+"""The artifact store: `<root>/<stage>/[<robot>/]<motion>/<key>/` folders with a `manifest.json`.
+
+An artifact is written into a hidden temporary sibling folder and renamed into place only after
+its manifest is written, so a crash, Ctrl-C or full disk never leaves a folder that looks complete.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+MANIFEST = "manifest.json"
+TEMP_PREFIX = ".tmp-"
+
+
+@dataclass(frozen=True)
+class ArtifactRef:
+    """A complete artifact on disk."""
+
+    stage: str
+    """Stage that wrote it."""
+    key: str
+    """Its content key."""
+    path: Path
+    """Its folder."""
+
+    @property
+    def manifest(self) -> dict[str, Any]:
+        return json.loads((self.path / MANIFEST).read_text())
+
+
+class ArtifactStore:
+    """Artifact folders under one root."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+
+    def folder(self, stage: str, robot: str | None, motion: str) -> Path:
+        """The folder holding every key of one stage for one (robot, motion)."""
+        parts = [stage] + ([robot] if robot else []) + [motion]
+        return self.root.joinpath(*parts)
+
+    def find(self, stage: str, robot: str | None, motion: str, key: str) -> ArtifactRef | None:
+        path = self.folder(stage, robot, motion) / key
+        return ArtifactRef(stage, key, path) if (path / MANIFEST).is_file() else None
+
+    def keys(self, stage: str, robot: str | None, motion: str) -> list[str]:
+        """Keys of the complete artifacts present, newest first."""
+        folder = self.folder(stage, robot, motion)
+        if not folder.is_dir():
+            return []
+        done = [p for p in folder.iterdir() if not p.name.startswith(".") and (p / MANIFEST).is_file()]
+        return [p.name for p in sorted(done, key=lambda p: (p / MANIFEST).stat().st_mtime, reverse=True)]
+
+    @contextmanager
+    def writing(self, stage: str, robot: str | None, motion: str, key: str, replace: bool = False) -> Iterator[Path]:
+        """Yield a temporary folder; on normal exit it becomes the artifact, on any error it is removed.
+
+        The caller writes `manifest.json` last; an artifact without one is never renamed into place.
+        With `replace` (a forced rerun) an existing artifact of the same key is swapped out only once
+        the new one is complete.
+        """
+        folder = self.folder(stage, robot, motion)
+        folder.mkdir(parents=True, exist_ok=True)
+        temp = folder / f"{TEMP_PREFIX}{key}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        temp.mkdir()
+        try:
+            yield temp
+            if not (temp / MANIFEST).is_file():
+                raise RuntimeError(f"stage {stage} finished without writing {MANIFEST}")
+            final = folder / key
+            if final.exists() and replace:
+                old = folder / f"{TEMP_PREFIX}old-{key}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+                os.replace(final, old)
+                os.replace(temp, final)
+                shutil.rmtree(old, ignore_errors=True)
+            elif final.exists():  # another process finished the same key first; its result is identical
+                shutil.rmtree(temp)
+            else:
+                os.replace(temp, final)
+        except BaseException:
+            shutil.rmtree(temp, ignore_errors=True)
+            raise
+
+    def remove_abandoned(self, stage: str, robot: str | None, motion: str) -> int:
+        """Delete temporary folders left by killed processes (whose pid no longer runs)."""
+        folder = self.folder(stage, robot, motion)
+        removed = 0
+        for temp in folder.glob(f"{TEMP_PREFIX}*") if folder.is_dir() else []:
+            pid = int(temp.name.split("-")[-2]) if temp.name.count("-") >= 3 else -1
+            if not _pid_alive(pid):
+                shutil.rmtree(temp, ignore_errors=True)
+                removed += 1
+        return removed
+
+
+def write_manifest(folder: Path, manifest: dict[str, Any]) -> None:
+    """Write the manifest through a temporary file so it is never seen half-written."""
+    temp = folder / f"{MANIFEST}.partial"
+    temp.write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+    os.replace(temp, folder / MANIFEST)
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True

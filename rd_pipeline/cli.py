@@ -1,0 +1,155 @@
+"""The `rd-pipeline` command line (tyro over frozen dataclasses, one per subcommand)."""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated
+
+import tyro
+from rich.console import Console
+
+from rd_pipeline.errors import PipelineError
+
+DEFAULT_ROBOT = "g1"
+DEFAULT_MOTION = "dance1_subject2"
+
+
+@dataclass(frozen=True)
+class Run:
+    """Run the DAG for one robot and motion; cached stages do no work."""
+
+    robot: str = DEFAULT_ROBOT
+    """Robot (`rd-pipeline robots`)."""
+    motion: str = DEFAULT_MOTION
+    """Motion (`rd-pipeline motions`)."""
+    profile: str | None = None
+    """Parameter profile: smoke, cpu or paper (default: the params file's, else smoke)."""
+    from_: Annotated[str | None, tyro.conf.arg(name="from")] = None
+    """First stage to run; earlier stages must already be cached."""
+    until: str | None = None
+    """Last stage to run."""
+    only: str | None = None
+    """Run just this stage."""
+    force: bool = False
+    """Recompute the selected stages even when cached."""
+    seed: int = 0
+    """Seed for stages that draw random numbers."""
+    source: str | None = None
+    """Force the motion source: `bvh` (parse + retarget) or `csv` (import)."""
+    set: tuple[str, ...] = ()
+    """Parameter overrides, `stage.param=value`."""
+    params_file: Path | None = None
+    """A DVC-style params file (`params.yaml`) with a `stages:` table."""
+
+
+@dataclass(frozen=True)
+class StageCommand:
+    """Run one stage (what `dvc.yaml` calls); its upstream artifacts must exist."""
+
+    name: tyro.conf.Positional[str]
+    """Stage name."""
+    motion: str
+    """Motion."""
+    robot: str | None = None
+    """Robot (not needed for robot-independent stages such as parse)."""
+    profile: str | None = None
+    """Parameter profile (default: the params file's, else smoke)."""
+    force: bool = False
+    """Recompute even when cached."""
+    seed: int = 0
+    """Seed for stages that draw random numbers."""
+    set: tuple[str, ...] = ()
+    """Parameter overrides, `stage.param=value`."""
+    params_file: Path | None = None
+    """A DVC-style params file (`params.yaml`)."""
+
+
+@dataclass(frozen=True)
+class Status:
+    """Per stage: key, path and whether it is cached, stale or missing."""
+
+    robot: str | None = None
+    """Only this robot (default: every robot with artifacts)."""
+    motion: str | None = None
+    """Only this motion (default: every motion with artifacts)."""
+    profile: str | None = None
+    """Parameter profile the keys are computed for."""
+    json: bool = False
+    """Print JSON instead of a table."""
+    source: str | None = None
+    """Force the motion source (`bvh` or `csv`)."""
+    set: tuple[str, ...] = ()
+    """Parameter overrides, `stage.param=value`."""
+    params_file: Path | None = None
+    """A DVC-style params file."""
+
+
+@dataclass(frozen=True)
+class View:
+    """Write (or show) a rerun recording: human skeleton and robot reference on one timeline."""
+
+    robot: str = DEFAULT_ROBOT
+    """Robot."""
+    motion: str = DEFAULT_MOTION
+    """Motion."""
+    out: Path | None = None
+    """Write an `.rrd` file here (headless); without it a viewer is spawned."""
+    spawn: bool = False
+    """Also open the written file in the rerun viewer."""
+    profile: str | None = None
+    """Parameter profile whose artifacts to show."""
+    source: str | None = None
+    """Force the motion source (`bvh` or `csv`)."""
+
+
+@dataclass(frozen=True)
+class FetchLafan:
+    """Install the official lafan1.zip into `raw_lafan/` after checking its sha256."""
+
+    zip: Path | None = None
+    """A lafan1.zip already downloaded; without it the archive is downloaded."""
+
+
+@dataclass(frozen=True)
+class Robots:
+    """List the configured robots."""
+
+
+@dataclass(frozen=True)
+class Motions:
+    """List the motions available here and their sources."""
+
+
+def main(argv: list[str] | None = None) -> int:
+    command = tyro.extras.subcommand_cli_from_dict(
+        {
+            "run": Run, "stage": StageCommand, "status": Status, "view": View,
+            "fetch-lafan": FetchLafan, "robots": Robots, "motions": Motions,
+        },
+        prog="rd-pipeline", args=argv, description="LAFAN1 mocap -> humanoid dance policies, one DAG per (robot, motion).",
+    )
+    console = Console(stderr=True, soft_wrap=True)
+    try:
+        return _dispatch(command, console)
+    except PipelineError as exc:
+        console.print(f"[red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        return 2
+    except KeyboardInterrupt:
+        console.print("[red]interrupted[/]: no partial artifact was kept")
+        return 130
+
+
+def _dispatch(command: object, console: Console) -> int:
+    from rd_pipeline import commands
+
+    handlers = {
+        Run: commands.run, StageCommand: commands.stage, Status: commands.status, View: commands.view,
+        FetchLafan: commands.fetch_lafan, Robots: commands.robots, Motions: commands.motions,
+    }
+    return handlers[type(command)](command, console)
+
+
+def entry_point() -> None:
+    sys.exit(main())

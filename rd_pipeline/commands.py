@@ -1,0 +1,150 @@
+"""What each `rd-pipeline` subcommand does (the CLI module only parses arguments)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+from typing import TYPE_CHECKING
+
+from rich.console import Console
+from rich.table import Table
+
+from rd_pipeline import paths
+from rd_pipeline.artifacts.runner import Pipeline, execute, resolve_source, stage_status
+from rd_pipeline.artifacts.store import ArtifactStore
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.params import layered_params
+
+if TYPE_CHECKING:
+    from rd_pipeline.cli import FetchLafan, Motions, Robots, Run, StageCommand, Status, View
+
+
+def _registry():
+    from stages import REGISTRY
+
+    return REGISTRY
+
+
+def _pipeline(robot, motion, profile, source, params_file, assignments, seed=None) -> Pipeline:
+    registry = _registry()
+    names = [s.name for s in registry]
+    if robot is not None:
+        from rd_pipeline.robots.config import load_robot_config
+
+        load_robot_config(robot)  # unknown robot: one clear line before anything else
+    values = layered_params(profile, names, params_file, assignments)
+    if seed is not None:
+        for stage in registry:
+            if "seed" in {f.name for f in dataclasses.fields(stage.params)}:
+                values.setdefault(stage.name, {}).setdefault("seed", seed)
+    return Pipeline(registry, robot, motion, resolve_source(robot, motion, source), values)
+
+
+def run(cmd: Run, console: Console) -> int:
+    pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, cmd.source, cmd.params_file, cmd.set, cmd.seed)
+    store = ArtifactStore(paths.artifacts_dir())
+    console.print(f"rd-pipeline: {cmd.robot}/{cmd.motion} from {pipeline.source}, artifacts in {store.root}")
+    execute(pipeline, store, start=cmd.from_, until=cmd.until, only=cmd.only, force=cmd.force, console=console)
+    return 0
+
+
+def stage(cmd: StageCommand, console: Console) -> int:
+    by_name = {s.name: s for s in _registry()}
+    if cmd.name not in by_name:
+        raise PipelineError(f"unknown stage '{cmd.name}' (stages: {', '.join(by_name)})")
+    chosen = by_name[cmd.name]
+    pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, chosen.source, cmd.params_file, cmd.set, cmd.seed)
+    execute(pipeline, ArtifactStore(paths.artifacts_dir()), only=cmd.name, force=cmd.force, console=console)
+    return 0
+
+
+def status(cmd: Status, console: Console) -> int:
+    store = ArtifactStore(paths.artifacts_dir())
+    if cmd.robot and cmd.motion:
+        pairs = [(cmd.robot, cmd.motion)]
+    else:
+        pairs = _pairs_in_store(store, cmd.robot, cmd.motion)
+    reports = []
+    for robot, motion in pairs:
+        pipeline = _pipeline(robot, motion, cmd.profile, cmd.source, cmd.params_file, cmd.set)
+        if robot is None:  # a motion with only robot-independent artifacts so far
+            pipeline = dataclasses.replace(pipeline, registry=tuple(s for s in pipeline.registry if not s.per_robot))
+        reports.append({"robot": robot, "motion": motion, "source": pipeline.source,
+                        "stages": stage_status(pipeline, store)})
+    if cmd.json:
+        print(json.dumps({"artifacts": str(store.root), "pipelines": reports}, indent=2))
+        return 0
+    if not reports:
+        console.print(f"no artifacts in {store.root}")
+    colors = {"cached": "green", "stale": "yellow", "missing": "red"}
+    for report in reports:
+        table = Table(title=f"{report['robot'] or '(any robot)'}/{report['motion']} ({report['source']})")
+        for column in ("stage", "state", "key", "path"):
+            table.add_column(column)
+        for row in report["stages"]:
+            state = f"[{colors[row['state']]}]{row['state']}[/]"
+            table.add_row(row["stage"], state, row["key"] or "-", row["path"] or row.get("reason", ""))
+        Console().print(table)
+    return 0
+
+
+def _pairs_in_store(store: ArtifactStore, robot: str | None, motion: str | None) -> list[tuple[str | None, str]]:
+    """(robot, motion) pairs that have any artifact, filtered; robot None for robot-independent ones only."""
+    found: set[tuple[str | None, str]] = set()
+    for stage in _registry():
+        root = store.root / stage.name
+        folders = root.glob("*/*") if stage.per_robot else root.glob("*")
+        for folder in folders if root.is_dir() else []:
+            pair = (folder.parent.name, folder.name) if stage.per_robot else (None, folder.name)
+            found.add(pair)
+    with_robot = {m for r, m in found if r is not None}
+    pairs = [(r, m) for r, m in found if r is not None or m not in with_robot]
+    pairs = [(r, m) for r, m in pairs if (robot is None or r in (robot, None)) and (motion is None or m == motion)]
+    return sorted(pairs, key=lambda p: (p[1], p[0] or ""))
+
+
+def view(cmd: View, console: Console) -> int:
+    from rd_pipeline.viz.recording import record_motion
+
+    pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, cmd.source, None, ())
+    store = ArtifactStore(paths.artifacts_dir())
+    # Only stages that produce motion are needed; they are computed or taken from the cache.
+    motion_stages = [s.name for s in pipeline.chain() if s.provides in ("human_motion", "reference")]
+    outcomes = execute(pipeline, store, until=motion_stages[-1], console=console) if motion_stages else []
+    artifacts = {o.name: o.path for o in outcomes}
+    path = record_motion(cmd.robot, cmd.motion, artifacts, cmd.out)
+    if path is not None:
+        console.print(f"wrote {path}")
+        if cmd.spawn:
+            subprocess.Popen([sys.executable, "-m", "rerun", str(path)])
+    return 0
+
+
+def fetch_lafan(cmd: FetchLafan, console: Console) -> int:
+    from rd_pipeline.motion.lafan_download import install_lafan
+
+    installed = install_lafan(cmd.zip, paths.lafan_dir(), console)
+    console.print(f"installed {len(installed)} BVH files into {paths.lafan_dir()}")
+    return 0
+
+
+def robots(cmd: Robots, console: Console) -> int:
+    from rd_pipeline.robots.config import available_robots, load_robot_config
+
+    for name in available_robots():
+        config = load_robot_config(name)
+        print(f"{name:<6} {len(config.joint_names):>2} joints, {len(config.policy_joints):>2} policy  {config.description}")
+    return 0
+
+
+def motions(cmd: Motions, console: Console) -> int:
+    found = paths.available_motions()
+    if not found:
+        raise PipelineError(
+            f"no motions: {paths.lafan_dir()} has no BVH and RD_RETARGETED_DIR is not set or empty"
+        )
+    for name, sources in found.items():
+        print(f"{name:<18} {' '.join(sources)}")
+    return 0

@@ -1,0 +1,5 @@
+"""The one exception type users see: its message is the single line the CLI prints."""
+
+
+class PipelineError(Exception):
+    """Bad input or a missing prerequisite. The message names the file, field or value at fault."""

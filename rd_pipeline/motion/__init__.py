@@ -1,0 +1,1 @@
+"""Motion I/O: BVH parsing, human motion, robot reference motions, dataset CSV import."""

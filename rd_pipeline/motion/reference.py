@@ -1,0 +1,127 @@
+"""The robot reference motion (SPEC format; field names follow mjlab/BeyondMimic motion files)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.robots import Robot
+
+REFERENCE_FILE = "reference.npz"
+"""File name of a reference motion inside an artifact."""
+
+
+@dataclass(frozen=True)
+class ReferenceMotion:
+    """A robot trajectory at a fixed rate, with world-frame body poses and velocities."""
+
+    fps: float
+    """Frames per second (50 for every artifact the pipeline writes)."""
+    joint_names: tuple[str, ...]
+    """Actuated joints in the robot config's order."""
+    body_names: tuple[str, ...]
+    """Every body of the model but the world."""
+    joint_pos: np.ndarray
+    """(T, J) joint angles, rad."""
+    joint_vel: np.ndarray
+    """(T, J) joint velocities, rad/s."""
+    root_pos: np.ndarray
+    """(T, 3) floating-base position, m."""
+    root_quat: np.ndarray
+    """(T, 4) floating-base orientation, wxyz."""
+    body_pos_w: np.ndarray
+    """(T, B, 3) body positions in the world."""
+    body_quat_w: np.ndarray
+    """(T, B, 4) body orientations in the world, wxyz."""
+    body_lin_vel_w: np.ndarray
+    """(T, B, 3) body linear velocities in the world, m/s."""
+    body_ang_vel_w: np.ndarray
+    """(T, B, 3) body angular velocities in the world, rad/s."""
+    foot_contact: np.ndarray
+    """(T, 2) left/right foot in contact with the ground."""
+
+    @property
+    def n_frames(self) -> int:
+        return self.joint_pos.shape[0]
+
+    @property
+    def duration_s(self) -> float:
+        return self.n_frames / self.fps
+
+    def save(self, path: Path) -> None:
+        arrays = {f.name: getattr(self, f.name) for f in fields(self)}
+        arrays["joint_names"] = np.array(self.joint_names)
+        arrays["body_names"] = np.array(self.body_names)
+        np.savez(path, **arrays)
+
+    @classmethod
+    def load(cls, path: Path) -> ReferenceMotion:
+        with np.load(path) as data:
+            missing = [f.name for f in fields(cls) if f.name not in data]
+            if missing:
+                raise PipelineError(f"{path}: reference motion lacks field '{missing[0]}'")
+            values = {f.name: data[f.name] for f in fields(cls)}
+        values["fps"] = float(values["fps"])
+        values["joint_names"] = tuple(str(n) for n in values["joint_names"])
+        values["body_names"] = tuple(str(n) for n in values["body_names"])
+        return cls(**values)
+
+
+def reference_from_joint_trajectory(
+    robot: Robot, fps: float, root_pos: np.ndarray, root_quat: np.ndarray, joint_pos: np.ndarray,
+    foot_contact: np.ndarray,
+) -> ReferenceMotion:
+    """Complete a joint-space trajectory with body poses (MuJoCo FK) and finite-difference velocities."""
+    model, data = robot.model, mujoco.MjData(robot.model)
+    n_frames, body_ids = joint_pos.shape[0], np.array(list(robot.body_ids.values()))
+    body_pos = np.empty((n_frames, len(body_ids), 3))
+    body_quat = np.empty((n_frames, len(body_ids), 4))
+    for t in range(n_frames):
+        data.qpos[:3], data.qpos[3:7] = root_pos[t], root_quat[t]
+        data.qpos[robot.qpos_indices] = joint_pos[t]
+        mujoco.mj_kinematics(model, data)
+        body_pos[t], body_quat[t] = data.xpos[body_ids], data.xquat[body_ids]
+    dt = 1.0 / fps
+    return ReferenceMotion(
+        fps=fps,
+        joint_names=robot.config.joint_names,
+        body_names=tuple(robot.body_names),
+        joint_pos=joint_pos,
+        joint_vel=_derivative(joint_pos, dt),
+        root_pos=root_pos,
+        root_quat=root_quat,
+        body_pos_w=body_pos,
+        body_quat_w=body_quat,
+        body_lin_vel_w=_derivative(body_pos, dt),
+        body_ang_vel_w=angular_velocity(body_quat, dt),
+        foot_contact=foot_contact,
+    )
+
+
+def _derivative(values: np.ndarray, dt: float) -> np.ndarray:
+    """Central differences inside, one-sided at the ends; consistent with the sampled positions."""
+    if values.shape[0] < 2:
+        return np.zeros_like(values)
+    return np.gradient(values, dt, axis=0)
+
+
+def angular_velocity(quat_wxyz: np.ndarray, dt: float) -> np.ndarray:
+    """World-frame angular velocity (T, ..., 3) from orientations (T, ..., 4), central differences."""
+    shape = quat_wxyz.shape[:-1]
+    if shape[0] < 2:
+        return np.zeros((*shape, 3))
+    rot = Rotation.from_quat(quat_wxyz.reshape(-1, 4)[:, [1, 2, 3, 0]])
+    rot = rot.as_matrix().reshape(*shape, 3, 3)
+    # R_next R_prev^T is the world-frame rotation over the interval.
+    prev = np.concatenate([rot[:1], rot[:-1]])
+    nxt = np.concatenate([rot[1:], rot[-1:]])
+    span = np.full(shape[0], 2.0 * dt)
+    span[0] = span[-1] = dt
+    delta = np.einsum("...ab,...cb->...ac", nxt, prev)
+    rotvec = Rotation.from_matrix(delta.reshape(-1, 3, 3)).as_rotvec().reshape(*shape, 3)
+    return rotvec / span.reshape(-1, *([1] * (len(shape))))

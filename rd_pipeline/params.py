@@ -1,0 +1,56 @@
+"""Layering stage parameters: profile < params file (`params.yaml`) < `--set stage.param=value`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.profiles import load_profile
+
+DEFAULT_PROFILE = "smoke"
+
+
+def read_params_file(path: Path, stage_names: list[str]) -> tuple[str | None, dict[str, dict[str, Any]]]:
+    """(profile, per-stage values) from a DVC-style params file with a `stages:` table."""
+    try:
+        raw = yaml.safe_load(path.read_text()) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        raise PipelineError(f"{path}: cannot read params file ({str(exc).splitlines()[0]})") from None
+    stages = raw.get("stages") or {}
+    if not isinstance(stages, dict):
+        raise PipelineError(f"{path}: 'stages' must be a mapping of stage name to params")
+    for name, values in stages.items():
+        if name not in stage_names:
+            raise PipelineError(f"{path}: stages.{name} is not a stage (stages: {', '.join(stage_names)})")
+        if not isinstance(values, dict):
+            raise PipelineError(f"{path}: stages.{name} must be a mapping of params")
+    return raw.get("profile"), stages
+
+
+def parse_assignments(assignments: tuple[str, ...], stage_names: list[str]) -> dict[str, dict[str, Any]]:
+    """`stage.param=value` strings -> per-stage values (types are checked against the params later)."""
+    values: dict[str, dict[str, Any]] = {}
+    for item in assignments:
+        target, sep, value = item.partition("=")
+        stage, dot, param = target.partition(".")
+        if not sep or not dot or not param:
+            raise PipelineError(f"--set {item}: expected stage.param=value")
+        if stage not in stage_names:
+            raise PipelineError(f"--set {item}: unknown stage '{stage}' (stages: {', '.join(stage_names)})")
+        values.setdefault(stage, {})[param] = value
+    return values
+
+
+def layered_params(
+    profile: str | None, stage_names: list[str], params_file: Path | None, assignments: tuple[str, ...]
+) -> dict[str, dict[str, Any]]:
+    file_profile, file_values = read_params_file(params_file, stage_names) if params_file else (None, {})
+    layers = [load_profile(profile or file_profile or DEFAULT_PROFILE), file_values, parse_assignments(assignments, stage_names)]
+    merged: dict[str, dict[str, Any]] = {}
+    for layer in layers:
+        for stage, values in layer.items():
+            merged.setdefault(stage, {}).update(values)
+    return merged

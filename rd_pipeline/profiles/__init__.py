@@ -1,0 +1,24 @@
+"""Profiles: named sets of stage parameters (data, not code branches).
+
+`smoke` runs in seconds (CI), `cpu` on a workstation in hours, `paper` on one GPU with the
+appendix settings. Each is a TOML file here with one table per stage; a stage absent from a
+profile uses its params dataclass defaults.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from rd_pipeline.errors import PipelineError
+
+PROFILE_DIR = Path(__file__).parent
+PROFILES = tuple(sorted(p.stem for p in PROFILE_DIR.glob("*.toml")))
+
+
+def load_profile(name: str) -> dict[str, dict[str, Any]]:
+    path = PROFILE_DIR / f"{name}.toml"
+    if not path.is_file():
+        raise PipelineError(f"unknown profile '{name}' (profiles: {', '.join(PROFILES)})")
+    return tomllib.loads(path.read_text())

@@ -1,0 +1,33 @@
+"""Locating robot model files: `RD_ROBOT_ASSETS`, else the `robot_descriptions` unitree_ros clone."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from rd_pipeline.errors import PipelineError
+
+
+def assets_root() -> Path:
+    """A folder laid out like unitree_ros `robots/` (holds `g1_description/`, `h1_description/`, ...)."""
+    value = os.environ.get("RD_ROBOT_ASSETS")
+    if value:
+        root = Path(value).expanduser().resolve()
+        if not root.is_dir():
+            raise PipelineError(f"RD_ROBOT_ASSETS={value}: not a folder")
+        return root
+    try:
+        from robot_descriptions._cache import clone_to_cache
+
+        return Path(clone_to_cache("unitree_ros")) / "robots"
+    except Exception as exc:  # network or git failure: say what to do instead
+        raise PipelineError(
+            f"robot assets: RD_ROBOT_ASSETS is not set and robot_descriptions could not fetch unitree_ros ({exc})"
+        ) from None
+
+
+def asset_path(relative: str) -> Path:
+    path = assets_root() / relative
+    if not path.is_file():
+        raise PipelineError(f"{path}: robot model file not found (check RD_ROBOT_ASSETS)")
+    return path

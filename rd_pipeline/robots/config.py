@@ -1,0 +1,162 @@
+"""Robot configuration: one TOML file per robot under `robots/`, parsed into a frozen dataclass.
+
+Per-joint values (gains, limits, default pose) are written as glob patterns over joint names, the
+first matching pattern winning, so a config reads like the robot's spec sheet rather than a list
+of 27 numbers.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.paths import ROBOT_CONFIG_DIR
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    """Everything the pipeline needs to know about one robot, in the MJCF actuator order."""
+
+    name: str
+    """Short id used on the command line and in artifact paths (`g1`, `h1`, `h1_2`)."""
+    description: str
+    """One line for `rd-pipeline robots`."""
+    source: Path
+    """The TOML file this came from (named in every error message)."""
+    mjcf: str
+    """MJCF path relative to the unitree_ros `robots/` folder."""
+    urdf: str
+    """URDF path relative to the unitree_ros `robots/` folder."""
+    joint_names: tuple[str, ...]
+    """All actuated joints, in the model's actuator order."""
+    policy_joints: tuple[str, ...]
+    """Joints the policy commands; the rest are held at `default_pos` by PD."""
+    residual_indices: tuple[int, ...]
+    """Indices into `policy_joints` that receive residual actions in `selective` mode."""
+    kp: np.ndarray
+    """PD stiffness per joint (N m/rad)."""
+    kd: np.ndarray
+    """PD damping per joint (N m s/rad)."""
+    effort_limit: np.ndarray
+    """Torque limit per joint (N m)."""
+    velocity_limit: np.ndarray
+    """Velocity limit per joint (rad/s)."""
+    default_pos: np.ndarray
+    """Default standing pose per joint (rad)."""
+    root_body: str
+    """The floating-base body."""
+    foot_bodies: tuple[str, str]
+    """Left and right foot bodies (contact labels, foot metrics)."""
+    tracking_bodies: tuple[str, ...]
+    """Bodies tracked by rewards and validation metrics."""
+    termination_bodies: tuple[str, ...]
+    """Bodies whose distance from the reference ends an episode ("motion far")."""
+    retarget_map: dict[str, str]
+    """Robot body -> LAFAN1 joint it follows during retargeting."""
+    csv_joints: tuple[str, ...]
+    """Joint order of the LAFAN1_Retargeting_Dataset CSV columns for this robot."""
+
+    @property
+    def policy_indices(self) -> np.ndarray:
+        """Positions of the policy joints within `joint_names`."""
+        return np.array([self.joint_names.index(j) for j in self.policy_joints], dtype=np.int64)
+
+
+def config_path(name: str) -> Path:
+    return ROBOT_CONFIG_DIR / f"{name}.toml"
+
+
+def available_robots() -> list[str]:
+    return sorted(p.stem for p in ROBOT_CONFIG_DIR.glob("*.toml"))
+
+
+def load_robot_config(name: str, path: Path | None = None) -> RobotConfig:
+    """Parse `robots/<name>.toml` (or `path`). Checks against the model are in `robots.model`."""
+    path = path or config_path(name)
+    if not path.is_file():
+        raise PipelineError(f"unknown robot '{name}': no {path} (available: {', '.join(available_robots())})")
+    try:
+        raw = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise PipelineError(f"{path}: {exc}") from None
+    reader = _Fields(raw, path)
+    joints = tuple(reader.get("joints.order", list))
+    policy = reader.get("joints.policy", (str, list))
+    policy_joints = joints if policy == "all" else tuple(policy)
+    csv_joints = reader.get("dataset.csv_joints", (str, list))
+    feet = reader.get("bodies.feet", list)
+    if len(feet) != 2:
+        raise PipelineError(f"{path}: bodies.feet must name 2 bodies (left, right), got {len(feet)}")
+    config = RobotConfig(
+        name=reader.get("name", str),
+        description=reader.get("description", str),
+        source=path,
+        mjcf=reader.get("asset.mjcf", str),
+        urdf=reader.get("asset.urdf", str),
+        joint_names=joints,
+        policy_joints=policy_joints,
+        residual_indices=tuple(reader.get("joints.residual_indices", list)),
+        kp=reader.per_joint("joints.kp", joints),
+        kd=reader.per_joint("joints.kd", joints),
+        effort_limit=reader.per_joint("joints.effort_limit", joints),
+        velocity_limit=reader.per_joint("joints.velocity_limit", joints),
+        default_pos=reader.per_joint("joints.default_pos", joints),
+        root_body=reader.get("bodies.root", str),
+        foot_bodies=(feet[0], feet[1]),
+        tracking_bodies=tuple(reader.get("bodies.tracking", list)),
+        termination_bodies=tuple(reader.get("bodies.termination", list)),
+        retarget_map=dict(reader.get("bodies.retarget", dict)),
+        csv_joints=joints if csv_joints == "order" else tuple(csv_joints),
+    )
+    if config.name != name:
+        raise PipelineError(f"{path}: name is '{config.name}' but the file is for robot '{name}'")
+    _check_internal(config)
+    return config
+
+
+def _check_internal(config: RobotConfig) -> None:
+    where = config.source
+    for joint in config.policy_joints:
+        if joint not in config.joint_names:
+            raise PipelineError(f"{where}: joints.policy names '{joint}', which is not in joints.order")
+    for index in config.residual_indices:
+        if not 0 <= index < len(config.policy_joints):
+            raise PipelineError(
+                f"{where}: joints.residual_indices has {index}, outside the {len(config.policy_joints)} policy joints"
+            )
+
+
+class _Fields:
+    """Typed access to dotted TOML keys with errors that name the file and the key."""
+
+    def __init__(self, raw: dict, path: Path) -> None:
+        self.raw, self.path = raw, path
+
+    def get(self, dotted: str, kind: type | tuple[type, ...]):
+        node = self.raw
+        for part in dotted.split("."):
+            if not isinstance(node, dict) or part not in node:
+                raise PipelineError(f"{self.path}: missing field '{dotted}'")
+            node = node[part]
+        if not isinstance(node, kind):
+            raise PipelineError(f"{self.path}: field '{dotted}' has the wrong type ({type(node).__name__})")
+        return node
+
+    def per_joint(self, dotted: str, joints: tuple[str, ...]) -> np.ndarray:
+        patterns: dict = self.get(dotted, dict)
+        values = np.empty(len(joints))
+        for i, joint in enumerate(joints):
+            match = next((p for p in patterns if fnmatch.fnmatchcase(joint, p)), None)
+            if match is None:
+                raise PipelineError(f"{self.path}: {dotted} has no pattern matching joint '{joint}'")
+            value = patterns[match]
+            if not isinstance(value, (int, float)) or not np.isfinite(value):
+                raise PipelineError(f"{self.path}: {dotted}.\"{match}\" must be a finite number, got {value!r}")
+            values[i] = float(value)
+        values.setflags(write=False)
+        return values

@@ -1,0 +1,1 @@
+"""Visualization: rerun recordings of human and robot motion."""

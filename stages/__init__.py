@@ -1,0 +1,10 @@
+"""The DAG stages, one thin module each. `REGISTRY` lists the stages that exist, in pipeline order."""
+
+from rd_pipeline.artifacts.stage import Stage
+from stages import import_motion, parse
+
+REGISTRY: tuple[Stage, ...] = (parse.STAGE, import_motion.STAGE)
+
+
+def stage_names() -> list[str]:
+    return [stage.name for stage in REGISTRY]

@@ -1,0 +1,78 @@
+"""`import`: a LAFAN1_Retargeting_Dataset CSV -> the robot reference motion at 50 Hz, by forward kinematics."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rd_pipeline import paths
+from rd_pipeline.artifacts.stage import Stage, StageContext
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion.contact import ContactThresholds
+from rd_pipeline.motion.reference import REFERENCE_FILE
+from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+from rd_pipeline.robots import load_robot
+from rd_pipeline.robots.assets import asset_path
+from rd_pipeline.robots.config import config_path, load_robot_config
+
+
+@dataclass(frozen=True)
+class ImportParams:
+    """Resampling of the dataset CSV and foot-contact labelling."""
+
+    source_fps: float = 30.0
+    """Frame rate of the dataset CSVs."""
+    fps: float = 50.0
+    """Frame rate of the reference motion (the policy rate)."""
+    interpolation: str = "cubic"
+    """Joint and root-position interpolation: `cubic` (smooth velocities) or `linear`."""
+    contact_enter_height_m: float = ContactThresholds.enter_height_m
+    """A foot lands below this height above the clip's ground ..."""
+    contact_enter_speed_m_s: float = ContactThresholds.enter_speed_m_s
+    """... moving horizontally slower than this."""
+    contact_exit_height_m: float = ContactThresholds.exit_height_m
+    """A planted foot lifts off above this height ..."""
+    contact_exit_speed_m_s: float = ContactThresholds.exit_speed_m_s
+    """... or moving faster than this."""
+
+
+def _inputs(robot: str | None, motion: str) -> dict[str, Path]:
+    assert robot is not None
+    csv = paths.csv_path(robot, motion)
+    if csv is None:
+        raise PipelineError(f"import of {robot}/{motion}: RD_RETARGETED_DIR is not set")
+    config = load_robot_config(robot)
+    return {"csv": csv, "robot_config": config_path(robot), "mjcf": asset_path(config.mjcf)}
+
+
+def _run(ctx: StageContext) -> dict[str, Any]:
+    p = ctx.params
+    result = import_retargeted_csv(
+        ctx.inputs["csv"], load_robot(ctx.robot), p.source_fps, p.fps, p.interpolation,
+        ContactThresholds(p.contact_enter_height_m, p.contact_enter_speed_m_s, p.contact_exit_height_m, p.contact_exit_speed_m_s),
+    )
+    if result.dropped_joints:
+        ctx.console.print(f"  dataset joints not in the {ctx.robot} model, dropped: {', '.join(result.dropped_joints)}")
+    reference = result.reference
+    reference.save(ctx.out_dir / REFERENCE_FILE)
+    return {
+        "frames": reference.n_frames,
+        "fps": reference.fps,
+        "duration_s": round(reference.duration_s, 4),
+        "source_frames": result.source_frames,
+        "dropped_joints": list(result.dropped_joints),
+        "contact_fraction": [round(float(x), 4) for x in reference.foot_contact.mean(axis=0)],
+    }
+
+
+STAGE = Stage(
+    name="import",
+    version=1,
+    description="LAFAN1_Retargeting_Dataset CSV -> robot reference motion at 50 Hz",
+    params=ImportParams,
+    provides="reference",
+    run=_run,
+    inputs=_inputs,
+    source="csv",
+)

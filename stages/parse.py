@@ -1,0 +1,50 @@
+"""`parse`: a LAFAN1 BVH file -> human motion (global joint positions and orientations, Z-up, metres)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rd_pipeline import paths
+from rd_pipeline.artifacts.stage import Stage, StageContext
+from rd_pipeline.motion.bvh import read_bvh
+from rd_pipeline.motion.human import HUMAN_MOTION_FILE, LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
+
+
+@dataclass(frozen=True)
+class ParseParams:
+    """How BVH units map to the pipeline's world."""
+
+    length_unit_m: float = LAFAN_CM_TO_M
+    """Metres per BVH length unit (LAFAN1 is in centimetres)."""
+
+
+def _inputs(robot: str | None, motion: str) -> dict[str, Path]:
+    return {"bvh": paths.bvh_path(motion)}
+
+
+def _run(ctx: StageContext) -> dict[str, Any]:
+    clip = read_bvh(ctx.inputs["bvh"])
+    human = human_motion_from_bvh(clip, ctx.params.length_unit_m, LAFAN_TO_Z_UP)
+    human.save(ctx.out_dir / HUMAN_MOTION_FILE)
+    return {
+        "frames": human.n_frames,
+        "fps": round(human.fps, 6),
+        "duration_s": round(human.duration_s, 4),
+        "joints": len(human.names),
+        "height_range_m": [round(float(human.pos_w[..., 2].min()), 4), round(float(human.pos_w[..., 2].max()), 4)],
+    }
+
+
+STAGE = Stage(
+    name="parse",
+    version=1,
+    description="LAFAN1 BVH -> human motion (Z-up, metres)",
+    params=ParseParams,
+    provides="human_motion",
+    run=_run,
+    inputs=_inputs,
+    source="bvh",
+    per_robot=False,
+)
