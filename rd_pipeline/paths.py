@@ -8,7 +8,8 @@ from pathlib import Path
 from rd_pipeline.errors import PipelineError
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
-"""The checkout (holds `robots/`, `raw_lafan/`, `params.yaml`)."""
+"""The checkout holding the package and `robots/`. Data paths are relative to the working directory,
+as DVC runs commands from the project root."""
 
 ROBOT_CONFIG_DIR = PROJECT_ROOT / "robots"
 
@@ -19,8 +20,8 @@ def _env_path(name: str, default: Path | None) -> Path | None:
 
 
 def lafan_dir() -> Path:
-    """Folder of raw LAFAN1 BVH files (`RD_LAFAN_DIR`, default `raw_lafan/`)."""
-    return _env_path("RD_LAFAN_DIR", PROJECT_ROOT / "raw_lafan")  # type: ignore[return-value]
+    """Folder of raw LAFAN1 BVH files (`RD_LAFAN_DIR`, default `raw_lafan/` of the working directory)."""
+    return _env_path("RD_LAFAN_DIR", Path.cwd() / "raw_lafan")  # type: ignore[return-value]
 
 
 def retargeted_dir() -> Path | None:
@@ -29,7 +30,7 @@ def retargeted_dir() -> Path | None:
 
 
 def artifacts_dir() -> Path:
-    """Root of the content-addressed artifact store (`RD_ARTIFACTS`, default `artifacts/`)."""
+    """Root of the content-addressed artifact store (`RD_ARTIFACTS`, default `artifacts/` of the working directory)."""
     return _env_path("RD_ARTIFACTS", Path.cwd() / "artifacts")  # type: ignore[return-value]
 
 

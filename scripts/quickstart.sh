@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Set up a virtual environment and run the main job on the embedded default
+# (G1, dance1_subject2, smoke profile, artifacts in ./artifacts).
+#   EXTRAS=dev,dvc scripts/quickstart.sh     # extras to install (default: dev)
+#   SKIP_RUN=1 scripts/quickstart.sh         # set up only
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+if [ ! -x .venv/bin/python ]; then
+  python3 -m venv .venv
+fi
+.venv/bin/pip install --quiet --upgrade pip
+# The CPU wheel first: otherwise a torch dependency pulls several GB of CUDA packages.
+.venv/bin/pip install --quiet torch==2.13.0
+.venv/bin/pip install --quiet -e ".[${EXTRAS:-dev}]"
+
+# On the team's machines and in CI the data sits in ../shared; elsewhere set the variables yourself
+# (README: "Where data comes from").
+if [ -d ../shared/data ]; then
+  export RD_LAFAN_DIR="${RD_LAFAN_DIR:-$(cd ../shared/data/lafan1/bvh && pwd)}"
+  export RD_RETARGETED_DIR="${RD_RETARGETED_DIR:-$(cd ../shared/data/lafan1_retargeted && pwd)}"
+  export RD_ROBOT_ASSETS="${RD_ROBOT_ASSETS:-$(cd ../shared/robots && pwd)}"
+fi
+
+if [ -z "${SKIP_RUN:-}" ]; then
+  .venv/bin/rd-pipeline run
+fi

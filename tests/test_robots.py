@@ -1,0 +1,112 @@
+"""Robot configs load in MuJoCo and Pinocchio, agree with each other, and bad configs say what is wrong."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.robots import load_pinocchio_model, load_robot, load_robot_config
+from rd_pipeline.robots.model import check_against_model
+
+EXPECTED = {"g1": (23, 23), "h1": (19, 19), "h1_2": (27, 21)}
+RESIDUAL_JOINTS = {
+    "g1": ["left_hip_pitch_joint", "left_knee_joint", "right_hip_pitch_joint", "right_knee_joint"],
+    "h1": ["left_hip_pitch_joint", "left_knee_joint", "right_hip_pitch_joint", "right_knee_joint"],
+    "h1_2": ["left_hip_pitch_joint", "left_knee_joint", "right_hip_pitch_joint", "right_knee_joint"],
+}
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_config_matches_spec_table(name: str) -> None:
+    robot = load_robot(name)
+    n_joints, n_policy = EXPECTED[name]
+    assert len(robot.config.joint_names) == n_joints == robot.model.nu
+    assert len(robot.config.policy_joints) == n_policy
+    residual = [robot.config.policy_joints[i] for i in robot.config.residual_indices]
+    assert residual == RESIDUAL_JOINTS[name]
+    assert np.all(robot.config.kp > 0) and np.all(robot.config.effort_limit > 0)
+    lo, hi = robot.joint_range.T
+    assert np.all((robot.config.default_pos >= lo) & (robot.config.default_pos <= hi))
+
+
+def test_h1_2_wrists_are_outside_the_policy() -> None:
+    config = load_robot_config("h1_2")
+    held = [j for j in config.joint_names if j not in config.policy_joints]
+    assert held == [f"{side}_wrist_{axis}_joint" for side in ("left", "right") for axis in ("roll", "pitch", "yaw")]
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_mujoco_and_pinocchio_agree(name: str) -> None:
+    robot = load_robot(name)
+    pin_model = load_pinocchio_model(robot.config)
+    pin_data = pin_model.createData()
+    # Pinocchio joint 0 is the universe, 1 the free flyer.
+    assert list(pin_model.names[2:]) == list(robot.config.joint_names)
+    data = mujoco.MjData(robot.model)
+    rng = np.random.default_rng(7)
+    lo, hi = robot.joint_range.T
+    bodies = sorted(set(robot.config.tracking_bodies) | set(robot.config.foot_bodies))
+    worst = 0.0
+    for _ in range(25):
+        quat = rng.normal(size=4)
+        quat /= np.linalg.norm(quat)
+        base = rng.uniform(-1, 1, size=3)
+        joints = rng.uniform(lo, hi)
+        data.qpos[:3], data.qpos[3:7] = base, quat
+        data.qpos[robot.qpos_indices] = joints
+        mujoco.mj_kinematics(robot.model, data)
+        q = np.concatenate([base, quat[[1, 2, 3, 0]], joints])
+        pin.framesForwardKinematics(pin_model, pin_data, q)
+        for body in bodies:
+            pin_pos = pin_data.oMf[pin_model.getFrameId(body)].translation
+            worst = max(worst, float(np.linalg.norm(pin_pos - data.xpos[robot.body_ids[body]])))
+    assert worst < 1e-3
+
+
+def _broken_config(tmp_path: Path, name: str, old: str, new: str) -> Path:
+    source = Path(load_robot_config(name).source)
+    text = source.read_text()
+    assert old in text
+    path = tmp_path / f"{name}.toml"
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+def test_missing_body_is_named(tmp_path: Path) -> None:
+    path = _broken_config(tmp_path, "g1", 'feet = ["left_ankle_roll_link"', 'feet = ["left_foot_link"')
+    config = load_robot_config("g1", path)
+    with pytest.raises(PipelineError) as error:
+        check_against_model(config, load_robot("g1").model)
+    assert str(error.value).startswith(f"{path}: bodies.feet names body 'left_foot_link', which is not in the model")
+
+
+def test_joint_order_mismatch_is_named(tmp_path: Path) -> None:
+    path = _broken_config(
+        tmp_path, "h1", '"left_hip_yaw_joint", "left_hip_roll_joint"', '"left_hip_roll_joint", "left_hip_yaw_joint"'
+    )
+    with pytest.raises(PipelineError, match=r"joints.order\[0\] is 'left_hip_roll_joint' but actuator 0 drives 'left_hip_yaw_joint'"):
+        check_against_model(load_robot_config("h1", path), load_robot("h1").model)
+
+
+def test_uncovered_joint_pattern_is_named(tmp_path: Path) -> None:
+    path = _broken_config(tmp_path, "h1", '"torso_joint" = 300.0', '"torso_x" = 300.0')
+    with pytest.raises(PipelineError, match=r"joints.kp has no pattern matching joint 'torso_joint'"):
+        load_robot_config("h1", path)
+
+
+def test_unknown_robot() -> None:
+    with pytest.raises(PipelineError, match=r"unknown robot 'g2'.*available: g1, h1, h1_2"):
+        load_robot_config("g2")
+
+
+def test_assets_resolve_from_variable(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("RD_ROBOT_ASSETS", str(tmp_path))
+    from rd_pipeline.robots.assets import asset_path
+
+    with pytest.raises(PipelineError, match=r"g1_description/g1_23dof.xml: robot model file not found"):
+        asset_path("g1_description/g1_23dof.xml")
