@@ -1,0 +1,44 @@
+"""Listing commands, help, and fetch-lafan's checksum guard."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from conftest import cli
+
+
+def test_robots_lists_the_three_configs() -> None:
+    result = cli("robots")
+    assert result.returncode == 0
+    lines = result.stdout.splitlines()
+    assert [line.split()[0] for line in lines] == ["g1", "h1", "h1_2"]
+    assert "27 joints, 21 policy" in lines[2]
+
+
+def test_motions_lists_sources() -> None:
+    result = cli("motions")
+    assert result.returncode == 0
+    table = {line.split()[0]: line.split()[1:] for line in result.stdout.splitlines()}
+    assert table["dance1_subject2"] == ["bvh", "csv:g1", "csv:h1", "csv:h1_2"]
+    assert table["dance2_subject4"] == ["csv:g1", "csv:h1", "csv:h1_2"]
+    assert len(table) == 8
+
+
+@pytest.mark.parametrize("command", ["run", "stage", "status", "view", "fetch-lafan", "robots", "motions"])
+def test_every_subcommand_has_help(command: str) -> None:
+    result = cli(command, "--help")
+    assert result.returncode == 0 and "usage:" in result.stdout.lower()
+
+
+def test_fetch_lafan_rejects_a_wrong_archive(tmp_path: Path) -> None:
+    archive = tmp_path / "lafan1.zip"
+    with zipfile.ZipFile(archive, "w") as handle:
+        handle.writestr("dance1_subject1.bvh", "HIERARCHY\n")
+    target = tmp_path / "raw"
+    result = cli("fetch-lafan", "--zip", str(archive), env={"RD_LAFAN_DIR": str(target)})
+    assert result.returncode == 2
+    assert f"error: {archive}: sha256 " in result.stderr and "is not the official lafan1.zip" in result.stderr
+    assert not target.exists()

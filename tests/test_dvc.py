@@ -1,0 +1,47 @@
+"""The DVC pipeline mirrors the registry and reproduces a stage in a temporary project."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from conftest import LAFAN_DIR, PROJECT
+from stages import stage_names
+
+
+def test_dvc_stages_are_the_registry() -> None:
+    dvc = yaml.safe_load((PROJECT / "dvc.yaml").read_text())
+    assert list(dvc["stages"]) == stage_names()
+    params = yaml.safe_load((PROJECT / "params.yaml").read_text())
+    assert set(params["stages"]) <= set(stage_names())
+    for name, stage in dvc["stages"].items():
+        assert stage["cmd"].startswith(f"rd-pipeline stage {name} ")
+        assert f"stages.{name}" in stage["params"]
+
+
+def test_dvc_repro_parse(tmp_path: Path) -> None:
+    dvc = shutil.which("dvc", path=str(Path(sys.executable).parent)) or shutil.which("dvc")
+    if dvc is None:
+        pytest.skip("the dvc extra is not installed (CI installs it)")
+    for name in ("dvc.yaml", "params.yaml"):
+        shutil.copy(PROJECT / name, tmp_path / name)
+    (tmp_path / "raw_lafan").mkdir()
+    (tmp_path / "raw_lafan" / "dance1_subject2.bvh").symlink_to(LAFAN_DIR / "dance1_subject2.bvh")
+    env = {k: v for k, v in os.environ.items() if k not in ("RD_LAFAN_DIR", "RD_ARTIFACTS")}
+    env["PATH"] = f"{Path(sys.executable).parent}:{env['PATH']}"
+    run = lambda *args: subprocess.run([dvc, *args], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    assert run("init", "--no-scm").returncode == 0
+    result = run("repro", "parse@dance1_subject2")
+    assert result.returncode == 0, result.stdout + result.stderr
+    (artifact,) = (tmp_path / "artifacts" / "parse" / "dance1_subject2").iterdir()
+    assert (artifact / "manifest.json").is_file() and (artifact / "human_motion.npz").is_file()
+    lock = yaml.safe_load((tmp_path / "dvc.lock").read_text())
+    assert "parse@dance1_subject2" in lock["stages"]
+    again = run("repro", "parse@dance1_subject2")
+    assert again.returncode == 0 and "didn't change, skipping" in again.stdout

@@ -1,0 +1,154 @@
+"""The content-addressed DAG runner: keys, cache hits, selection, forced reruns, atomic writes."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from conftest import PROJECT, cli
+from rd_pipeline.artifacts.keys import artifact_key
+from rd_pipeline.artifacts.runner import Pipeline, execute, resolve_source
+from rd_pipeline.artifacts.store import ArtifactStore
+from rd_pipeline.errors import PipelineError
+from stages import REGISTRY
+
+
+def _pipeline(robot: str, motion: str, values: dict | None = None, source: str | None = None) -> Pipeline:
+    return Pipeline(REGISTRY, robot, motion, resolve_source(robot, motion, source), values or {})
+
+
+def test_key_is_canonical_and_sensitive() -> None:
+    base = artifact_key("parse", 1, {"a": 1.0, "b": "x"}, {}, {"bvh": "00"})
+    assert base == artifact_key("parse", 1, {"b": "x", "a": 1.0}, {}, {"bvh": "00"})
+    assert len(base) == 12 and int(base, 16) >= 0
+    assert base != artifact_key("parse", 2, {"a": 1.0, "b": "x"}, {}, {"bvh": "00"})
+    assert base != artifact_key("parse", 1, {"a": 1.5, "b": "x"}, {}, {"bvh": "00"})
+    assert base != artifact_key("parse", 1, {"a": 1.0, "b": "x"}, {"up": "k"}, {"bvh": "00"})
+    assert base != artifact_key("parse", 1, {"a": 1.0, "b": "x"}, {}, {"bvh": "01"})
+
+
+def test_source_choice(monkeypatch: pytest.MonkeyPatch) -> None:
+    assert resolve_source("g1", "dance1_subject2", None) == "bvh"
+    assert resolve_source("h1_2", "dance2_subject4", None) == "csv"
+    assert resolve_source("g1", "dance1_subject2", "csv") == "csv"
+    assert [s.name for s in _pipeline("g1", "dance1_subject2").chain()][0] == "parse"
+    assert [s.name for s in _pipeline("h1_2", "dance2_subject4").chain()] == ["import"]
+    with pytest.raises(PipelineError, match=r"no data for motion 'dance9_subject1'"):
+        resolve_source("g1", "dance9_subject1", None)
+
+
+def test_cache_hit_does_no_work_and_force_redoes_it(artifacts: Path) -> None:
+    store = ArtifactStore(artifacts)
+    pipeline = _pipeline("g1", "dance1_subject2")
+    (first,) = execute(pipeline, store, until="parse")
+    assert not first.cached and (first.path / "manifest.json").is_file()
+    manifest = json.loads((first.path / "manifest.json").read_text())
+    assert manifest["stage"] == "parse" and manifest["key"] == first.key and manifest["robot"] is None
+    assert manifest["metrics"]["frames"] == 3945 and manifest["duration_s"] > 0
+    assert list(manifest["inputs"].values()) == [
+        "4f15d0b1caac72f9e58745f5ab9183d7dc051dd6fcdc4e1bd90af128b8cfab4d"
+    ]
+    stamp = (first.path / "human_motion.npz").stat().st_mtime_ns
+    (second,) = execute(pipeline, store, until="parse")
+    assert second.cached and second.key == first.key
+    assert (first.path / "human_motion.npz").stat().st_mtime_ns == stamp
+    (forced,) = execute(pipeline, store, until="parse", force=True)
+    assert not forced.cached and forced.key == first.key
+    assert (first.path / "human_motion.npz").stat().st_mtime_ns != stamp
+    assert [p.name for p in (artifacts / "parse" / "dance1_subject2").iterdir()] == [first.key]
+
+
+def test_params_change_the_key_and_the_old_artifact_turns_stale(artifacts: Path) -> None:
+    store = ArtifactStore(artifacts)
+    (old,) = execute(_pipeline("h1", "dance2_subject1"), store)
+    changed = _pipeline("h1", "dance2_subject1", {"import": {"interpolation": "linear"}})
+    from rd_pipeline.artifacts.runner import stage_status
+
+    (row,) = stage_status(changed, store)
+    assert row["state"] == "stale" and row["other_keys"] == [old.key]
+    (new,) = execute(changed, store)
+    assert new.key != old.key and not new.cached
+
+
+def test_selection_errors() -> None:
+    pipeline = _pipeline("h1_2", "dance2_subject4")
+    with pytest.raises(PipelineError, match=r"^--until: unknown stage 'train' \(stages: parse, import\)$"):
+        pipeline.select(None, "train", None)
+    with pytest.raises(PipelineError, match=r"^--only: stage 'parse' is not in the csv pipeline for h1_2/dance2_subject4"):
+        pipeline.select(None, None, "parse")
+
+
+def test_bad_parameter_is_named(artifacts: Path) -> None:
+    result = cli("run", "--robot", "h1", "--motion", "dance2_subject1", "--set", "import.fps=fast")
+    assert result.returncode == 2
+    assert "error: parameter 'import.fps' must be a float, got 'fast'" in result.stderr
+    result = cli("run", "--robot", "h1", "--motion", "dance2_subject1", "--set", "import.speed=2")
+    assert "error: unknown parameter 'import.speed'" in result.stderr
+    assert not (artifacts / "import").exists()
+
+
+def test_unknown_robot_and_motion_are_one_line(artifacts: Path) -> None:
+    result = cli("run", "--robot", "t800", "--motion", "dance1_subject2")
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert result.stderr.strip().splitlines()[-1].startswith("error: unknown robot 't800'")
+    result = cli("run", "--robot", "g1", "--motion", "tango")
+    assert result.returncode == 2
+    assert result.stderr.strip().startswith("error: no data for motion 'tango'")
+
+
+def test_cli_cache_hit_and_status_json(artifacts: Path) -> None:
+    first = cli("run", "--robot", "g1", "--motion", "dance1_subject2", "--until", "parse")
+    assert first.returncode == 0, first.stderr
+    second = cli("run", "--robot", "g1", "--motion", "dance1_subject2", "--until", "parse")
+    assert second.returncode == 0 and "cached parse" in second.stderr and "no work" in second.stderr
+    assert cli("stage", "import", "--robot", "h1_2", "--motion", "dance2_subject4").returncode == 0
+    status = json.loads(cli("status", "--json").stdout)
+    states = {(p["robot"], p["motion"], s["stage"]): s["state"] for p in status["pipelines"] for s in p["stages"]}
+    # parse is robot-independent: its artifact belongs to no robot.
+    assert states == {(None, "dance1_subject2", "parse"): "cached", ("h1_2", "dance2_subject4", "import"): "cached"}
+
+
+def test_killed_stage_leaves_no_artifact(artifacts: Path) -> None:
+    folder = artifacts / "import" / "h1_2" / "dance2_subject4"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "rd_pipeline", "stage", "import", "--robot", "h1_2", "--motion", "dance2_subject4"],
+        cwd=PROJECT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=os.environ.copy(),
+    )
+    deadline = time.time() + 60
+    while not list(folder.glob(".tmp-*")) and time.time() < deadline:
+        time.sleep(0.02)
+    time.sleep(0.5)  # well inside the ~2 s of work
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    assert process.returncode == -signal.SIGKILL
+    assert len(list(folder.glob(".tmp-*"))) == 1
+    assert ArtifactStore(artifacts).keys("import", "h1_2", "dance2_subject4") == []
+    status = json.loads(cli("status", "--robot", "h1_2", "--motion", "dance2_subject4", "--json").stdout)
+    assert status["pipelines"][0]["stages"][0]["state"] == "missing"
+    rerun = cli("stage", "import", "--robot", "h1_2", "--motion", "dance2_subject4")
+    assert rerun.returncode == 0 and "run    import" in rerun.stderr
+    assert list(folder.glob(".tmp-*")) == []  # the abandoned folder was cleaned up
+    assert len(ArtifactStore(artifacts).keys("import", "h1_2", "dance2_subject4")) == 1
+
+
+def test_interrupt_removes_the_partial_artifact(artifacts: Path) -> None:
+    folder = artifacts / "import" / "h1" / "dance2_subject2"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "rd_pipeline", "stage", "import", "--robot", "h1", "--motion", "dance2_subject2"],
+        cwd=PROJECT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=os.environ.copy(),
+    )
+    deadline = time.time() + 60
+    while not list(folder.glob(".tmp-*")) and time.time() < deadline:
+        time.sleep(0.02)
+    time.sleep(0.3)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130 and "Traceback" not in stderr
+    assert list(folder.iterdir()) == []
