@@ -60,6 +60,8 @@ class RobotConfig:
     """Robot body -> LAFAN1 joint it follows during retargeting."""
     csv_joints: tuple[str, ...]
     """Joint order of the LAFAN1_Retargeting_Dataset CSV columns for this robot."""
+    collision_pairs: tuple[tuple[str, str], ...]
+    """Body pairs that must not touch (arms vs torso, leg vs leg): kept apart by retargeting, counted by metrics."""
 
     @property
     def policy_indices(self) -> np.ndarray:
@@ -112,6 +114,7 @@ def load_robot_config(name: str, path: Path | None = None) -> RobotConfig:
         termination_bodies=tuple(reader.get("bodies.termination", list)),
         retarget_map=dict(reader.get("bodies.retarget", dict)),
         csv_joints=joints if csv_joints == "order" else tuple(csv_joints),
+        collision_pairs=tuple((a, b) for a, b in reader.get("collision.pairs", list)),
     )
     if config.name != name:
         raise PipelineError(f"{path}: name is '{config.name}' but the file is for robot '{name}'")

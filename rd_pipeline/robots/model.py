@@ -85,6 +85,7 @@ def check_against_model(config: RobotConfig, model: mujoco.MjModel) -> None:
         "bodies.tracking": list(config.tracking_bodies),
         "bodies.termination": list(config.termination_bodies),
         "bodies.retarget": list(config.retarget_map),
+        "collision.pairs": [body for pair in config.collision_pairs for body in pair],
     }
     for field, names in named_bodies.items():
         for body in names:
