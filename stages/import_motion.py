@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -9,6 +10,7 @@ from typing import Any
 from rd_pipeline import paths
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.evaluation.retarget_quality import QUALITY_FILE, retarget_quality
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.reference import REFERENCE_FILE
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
@@ -27,14 +29,8 @@ class ImportParams:
     """Frame rate of the reference motion (the policy rate)."""
     interpolation: str = "cubic"
     """Joint and root-position interpolation: `cubic` (smooth velocities) or `linear`."""
-    contact_enter_height_m: float = ContactThresholds.enter_height_m
-    """A foot lands below this height above the clip's ground ..."""
-    contact_enter_speed_m_s: float = ContactThresholds.enter_speed_m_s
-    """... moving horizontally slower than this."""
-    contact_exit_height_m: float = ContactThresholds.exit_height_m
-    """A planted foot lifts off above this height ..."""
-    contact_exit_speed_m_s: float = ContactThresholds.exit_speed_m_s
-    """... or moving faster than this."""
+    contact: ContactThresholds = ContactThresholds()
+    """When a robot foot counts as planted (its height above the clip's ground, and its speed)."""
 
 
 def _inputs(robot: str | None, motion: str) -> dict[str, Path]:
@@ -48,16 +44,17 @@ def _inputs(robot: str | None, motion: str) -> dict[str, Path]:
 
 def _run(ctx: StageContext) -> dict[str, Any]:
     p = ctx.params
-    result = import_retargeted_csv(
-        ctx.inputs["csv"], load_robot(ctx.robot), p.source_fps, p.fps, p.interpolation,
-        ContactThresholds(p.contact_enter_height_m, p.contact_enter_speed_m_s, p.contact_exit_height_m, p.contact_exit_speed_m_s),
-    )
+    robot = load_robot(ctx.robot)
+    result = import_retargeted_csv(ctx.inputs["csv"], robot, p.source_fps, p.fps, p.interpolation, p.contact)
     if result.dropped_joints:
         ctx.console.print(f"  dataset joints not in the {ctx.robot} model, dropped: {', '.join(result.dropped_joints)}")
     reference = result.reference
     reference.save(ctx.out_dir / REFERENCE_FILE)
+    # The same ruler as the retarget stage, so the dataset and our retargeting share one table.
+    quality = retarget_quality(robot, reference)
+    (ctx.out_dir / QUALITY_FILE).write_text(json.dumps(quality, indent=2) + "\n")
     return {
-        "frames": reference.n_frames,
+        **quality,
         "fps": reference.fps,
         "duration_s": round(reference.duration_s, 4),
         "source_frames": result.source_frames,

@@ -79,16 +79,41 @@ class Stage:
 
 
 def build_params(stage: Stage, values: dict[str, Any]) -> Any:
-    """The stage's params dataclass from defaults overridden by `values`, each checked against its type."""
-    known = {f.name: f for f in dataclasses.fields(stage.params)}
-    kwargs = {}
+    """The stage's params from defaults overridden by `values`, each checked against its type.
+
+    Params may nest frozen dataclasses (e.g. `weights.feet_position`); `values` may give them as
+    nested mappings (params files) or dotted names (`--set`).
+    """
+    return _override(stage.params(), values, stage.name)
+
+
+def _override(defaults: Any, values: dict[str, Any], prefix: str) -> Any:
+    known = {f.name: f for f in dataclasses.fields(defaults)}
+    nested: dict[str, dict[str, Any]] = {}
+    flat: dict[str, Any] = {}
     for name, value in values.items():
+        head, dot, rest = name.partition(".")
+        if dot:
+            nested.setdefault(head, {})[rest] = value
+        elif isinstance(value, dict):
+            nested.setdefault(head, {}).update(value)
+        else:
+            flat[name] = value
+    changes = {}
+    for name in [*flat, *nested]:
         if name not in known:
-            raise PipelineError(
-                f"unknown parameter '{stage.name}.{name}' (known: {', '.join(known) or 'none'})"
-            )
-        kwargs[name] = _coerce(f"{stage.name}.{name}", value, known[name].default)
-    return stage.params(**kwargs)
+            raise PipelineError(f"unknown parameter '{prefix}.{name}' (known: {', '.join(known) or 'none'})")
+    for name, value in flat.items():
+        default = getattr(defaults, name)
+        if dataclasses.is_dataclass(default):
+            raise PipelineError(f"parameter '{prefix}.{name}' is a group; set its fields ({prefix}.{name}.<field>)")
+        changes[name] = _coerce(f"{prefix}.{name}", value, default)
+    for name, group in nested.items():
+        default = getattr(defaults, name)
+        if not dataclasses.is_dataclass(default):
+            raise PipelineError(f"parameter '{prefix}.{name}' has no fields")
+        changes[name] = _override(default, group, f"{prefix}.{name}")
+    return dataclasses.replace(defaults, **changes)
 
 
 def _coerce(name: str, value: Any, default: Any) -> Any:

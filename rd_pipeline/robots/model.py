@@ -108,3 +108,10 @@ def load_pinocchio_model(config: RobotConfig):
     counter = iter(range(10**6))
     text = re.sub(r"<material>", lambda _: f'<material name="rd_material_{next(counter)}">', text)
     return pin.buildModelFromXML(text, pin.JointModelFreeFlyer())
+
+
+def collision_geoms(model: mujoco.MjModel, body_id: int) -> list[int]:
+    """The body's collision geoms (contype or conaffinity set), else all its geoms (the H1-2 wrists are visual only)."""
+    geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == body_id]
+    colliding = [g for g in geoms if model.geom_contype[g] or model.geom_conaffinity[g]]
+    return colliding or geoms

@@ -1,0 +1,1 @@
+"""Evaluation: quality metrics for reference motions and, later, for policies tracking them."""

@@ -1,0 +1,257 @@
+"""Retargeting quality of a reference motion: ground penetration, stance skating, limits, self-collision, smoothness.
+
+One ruler for every source of reference motions (the LAFAN1_Retargeting_Dataset CSVs, our own retargeting) so
+their numbers can share a table. Heights are measured against the world plane z = 0 with no per-clip ground
+estimate: a clip whose feet sink below the floor is scored for it, which is the point of the metric.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion.reference import ReferenceMotion
+from rd_pipeline.robots import Robot
+from rd_pipeline.robots.model import collision_geoms
+
+
+QUALITY_FILE = "quality.json"
+"""File name of a quality report inside an artifact (retarget and import stages)."""
+
+
+@dataclass(frozen=True)
+class QualityThresholds:
+    """When a foot stands, a body pair collides and a limit counts as broken."""
+
+    ground_contact_height_m: float = 0.02
+    """A foot is in stance (and its skating counts) while its lowest mesh point is below this height."""
+    self_collision_depth_m: float = 0.005
+    """A frame self-collides when a configured body pair penetrates deeper than this."""
+    joint_limit_tolerance_rad: float = 1e-6
+    """Slack beyond the model's joint range before a frame counts as a violation."""
+    velocity_limit_tolerance: float = 1e-6
+    """Relative slack on each joint's velocity limit."""
+
+
+@dataclass(frozen=True)
+class FootMeshes:
+    """The mesh points of each foot in its body frame; a foot's lowest world point is always one of them."""
+
+    body_names: tuple[str, str]
+    """Left and right foot bodies (`RobotConfig.foot_bodies`)."""
+    vertices: tuple[np.ndarray, np.ndarray]
+    """(V, 3) per foot: convex-hull vertices of the foot body's mesh geoms, in the body frame."""
+
+    @classmethod
+    def from_robot(cls, robot: Robot) -> FootMeshes:
+        """Every mesh geom of each foot body, visual or collision, whatever its group.
+
+        The G1 collides through four small spheres under the sole; the visual mesh is the foot a viewer
+        sees sink into the floor, so that is what penetration is measured on.
+        """
+        model = robot.model
+        per_foot = []
+        for body in robot.config.foot_bodies:
+            body_id = robot.body_ids[body]
+            geoms = [
+                g for g in range(model.ngeom)
+                if model.geom_bodyid[g] == body_id and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH
+            ]
+            if not geoms:
+                raise PipelineError(f"{robot.config.source}: foot body '{body}' has no mesh geom to measure")
+            points = np.concatenate([_mesh_points_in_body(model, g) for g in geoms])
+            per_foot.append(_hull_vertices(points))
+        return cls(body_names=robot.config.foot_bodies, vertices=(per_foot[0], per_foot[1]))
+
+    def lowest_z(self, body_pos_w: np.ndarray, body_quat_w: np.ndarray, body_names: Sequence[str]) -> np.ndarray:
+        """(T, 2) lowest world z of each foot's mesh, from body poses (T, B, 3) and (T, B, 4 wxyz)."""
+        lowest = np.empty((body_pos_w.shape[0], 2))
+        for foot, (body, vertices) in enumerate(zip(self.body_names, self.vertices)):
+            if body not in body_names:
+                raise PipelineError(f"foot body '{body}' is not among the reference's bodies")
+            index = list(body_names).index(body)
+            # Only world z is needed, so only the third row of each rotation matrix.
+            z_row = _rotation_z_row(body_quat_w[:, index])
+            lowest[:, foot] = body_pos_w[:, index, 2] + (z_row @ vertices.T).min(axis=1)
+        return lowest
+
+
+def retarget_quality(
+    robot: Robot,
+    reference: ReferenceMotion,
+    thresholds: QualityThresholds = QualityThresholds(),
+    keypoint_targets: np.ndarray | None = None,
+    keypoint_bodies: Sequence[str] | None = None,
+    frames_per_s: float | None = None,
+) -> dict[str, float | int | None]:
+    """SPEC retargeting metrics of one reference motion, as JSON-ready plain numbers.
+
+    `keypoint_targets` (T, K, 3) are the scaled human positions the bodies `keypoint_bodies` should reach;
+    without them `keypoint_error_mean_mm` is None. `frames_per_s` is the retargeter's throughput, passed
+    through. `skate_stance_mean_mm_s` is 0.0 when no foot ever comes within the contact height: a clip
+    that never stands cannot skate, and 0.0 keeps the column numeric across clips.
+    """
+    if tuple(reference.joint_names) != tuple(robot.config.joint_names):
+        raise PipelineError(f"reference joints do not match robot {robot.config.name}'s joint order")
+    n_frames = reference.n_frames
+    if n_frames == 0:
+        raise PipelineError("reference motion has no frames")
+    dt = 1.0 / reference.fps
+
+    lowest = FootMeshes.from_robot(robot).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
+    penetration = np.maximum(0.0, -lowest).max(axis=1)
+    foot_index = [reference.body_names.index(b) for b in robot.config.foot_bodies]
+    foot_speed = np.linalg.norm(_gradient(reference.body_pos_w[:, foot_index, :2], dt), axis=-1)
+    stance = lowest < thresholds.ground_contact_height_m
+    skate = float(foot_speed[stance].mean()) if stance.any() else 0.0
+
+    return {
+        "frames": int(n_frames),
+        "fps_frames_per_s": None if frames_per_s is None else _round(frames_per_s),
+        "penetration_max_mm": _round(1000.0 * penetration.max()),
+        "penetration_p95_mm": _round(1000.0 * np.percentile(penetration, 95.0)),
+        "skate_stance_mean_mm_s": _round(1000.0 * skate),
+        "joint_limit_violations": _joint_limit_violations(robot, reference.joint_pos, thresholds),
+        "velocity_limit_violations": _velocity_limit_violations(robot, reference.joint_pos, dt, thresholds),
+        "self_collision_frames": self_collision_frames(robot, reference, thresholds.self_collision_depth_m),
+        "jerk_mean": _round(_jerk_mean(reference.joint_pos, dt)),
+        "keypoint_error_mean_mm": _keypoint_error_mm(reference, keypoint_targets, keypoint_bodies),
+    }
+
+
+def self_collision_frames(robot: Robot, reference: ReferenceMotion, depth_m: float) -> int:
+    """Frames where any `collision_pairs` body pair has signed distance below -depth_m (MuJoCo geometry)."""
+    model = robot.model
+    geom_pairs = np.array(
+        [
+            (g1, g2)
+            for body_a, body_b in robot.config.collision_pairs
+            for g1 in collision_geoms(model, robot.body_ids[body_a])
+            for g2 in collision_geoms(model, robot.body_ids[body_b])
+        ],
+        dtype=np.int64,
+    ).reshape(-1, 2)
+    if len(geom_pairs) == 0:
+        return 0
+    geoms, columns = np.unique(geom_pairs, return_inverse=True)
+    columns = columns.reshape(-1, 2)
+    qpos = _qpos_trajectory(robot, reference)
+    data = mujoco.MjData(model)
+
+    # First pass: geom centres only. Two geoms can penetrate only where their bounding spheres overlap,
+    # and on a dance clip most pairs are apart most of the time, so few frames need the exact distance.
+    centres = np.empty((len(qpos), len(geoms), 3))
+    for t in range(len(qpos)):
+        data.qpos[:] = qpos[t]
+        mujoco.mj_kinematics(model, data)
+        centres[t] = data.geom_xpos[geoms]
+    # rbound 0 means unbounded (planes, height fields): never prune those.
+    radius = np.where(model.geom_rbound[geoms] > 0, model.geom_rbound[geoms], np.inf)
+    gap = np.linalg.norm(centres[:, columns[:, 0]] - centres[:, columns[:, 1]], axis=-1)
+    candidate = gap < radius[columns[:, 0]] + radius[columns[:, 1]]
+
+    colliding = 0
+    for t in np.flatnonzero(candidate.any(axis=1)):
+        data.qpos[:] = qpos[t]
+        mujoco.mj_kinematics(model, data)
+        for g1, g2 in geom_pairs[candidate[t]]:
+            # distmax 0: separated pairs stop early; only the depth of penetrating ones matters.
+            if mujoco.mj_geomDistance(model, data, int(g1), int(g2), 0.0, None) < -depth_m:
+                colliding += 1
+                break
+    return colliding
+
+
+def _qpos_trajectory(robot: Robot, reference: ReferenceMotion) -> np.ndarray:
+    """(T, nq): the free joint comes first (checked on load); joints outside the config stay at qpos0."""
+    qpos = np.tile(robot.model.qpos0, (reference.n_frames, 1))
+    qpos[:, :3] = reference.root_pos
+    qpos[:, 3:7] = reference.root_quat / np.linalg.norm(reference.root_quat, axis=1, keepdims=True)
+    qpos[:, robot.qpos_indices] = reference.joint_pos
+    return qpos
+
+
+def _joint_limit_violations(robot: Robot, joint_pos: np.ndarray, thresholds: QualityThresholds) -> int:
+    model = robot.model
+    limited = model.jnt_limited[[model.joint(name).id for name in robot.config.joint_names]].astype(bool)
+    low, high = robot.joint_range.T
+    tol = thresholds.joint_limit_tolerance_rad
+    outside = ((joint_pos < low - tol) | (joint_pos > high + tol)) & limited
+    return int(outside.any(axis=1).sum())
+
+
+def _velocity_limit_violations(robot: Robot, joint_pos: np.ndarray, dt: float, thresholds: QualityThresholds) -> int:
+    limit = robot.config.velocity_limit * (1.0 + thresholds.velocity_limit_tolerance)
+    return int((np.abs(_gradient(joint_pos, dt)) > limit).any(axis=1).sum())
+
+
+def _jerk_mean(joint_pos: np.ndarray, dt: float) -> float:
+    """Mean |d3q/dt3| over frames and joints; 0.0 for clips too short to have a third difference."""
+    if joint_pos.shape[0] < 4:
+        return 0.0
+    return float(np.abs(np.diff(joint_pos, n=3, axis=0)).mean() / dt**3)
+
+
+def _keypoint_error_mm(
+    reference: ReferenceMotion, targets: np.ndarray | None, bodies: Sequence[str] | None
+) -> float | None:
+    if targets is None:
+        return None
+    if bodies is None:
+        raise PipelineError("keypoint_targets given without keypoint_bodies")
+    targets = np.asarray(targets, dtype=float)
+    if targets.shape != (reference.n_frames, len(bodies), 3):
+        raise PipelineError(
+            f"keypoint_targets has shape {targets.shape}, expected ({reference.n_frames}, {len(bodies)}, 3)"
+        )
+    missing = [b for b in bodies if b not in reference.body_names]
+    if missing:
+        raise PipelineError(f"keypoint body '{missing[0]}' is not among the reference's bodies")
+    index = [reference.body_names.index(b) for b in bodies]
+    error = np.linalg.norm(reference.body_pos_w[:, index] - targets, axis=-1)
+    return _round(1000.0 * error.mean())
+
+
+def _gradient(values: np.ndarray, dt: float) -> np.ndarray:
+    """Central differences along time, one-sided at the ends (as the reference's own velocities)."""
+    if values.shape[0] < 2:
+        return np.zeros_like(values)
+    return np.gradient(values, dt, axis=0)
+
+
+def _mesh_points_in_body(model: mujoco.MjModel, geom: int) -> np.ndarray:
+    """(V, 3) vertices of a mesh geom in its body frame.
+
+    MuJoCo stores mesh vertices recentred on the mesh's own frame; geom_pos / geom_quat put that frame
+    back in the body.
+    """
+    mesh = model.geom_dataid[geom]
+    start, count = model.mesh_vertadr[mesh], model.mesh_vertnum[mesh]
+    vertices = model.mesh_vert[start:start + count].astype(float)
+    rotation = np.empty(9)
+    mujoco.mju_quat2Mat(rotation, model.geom_quat[geom])
+    return vertices @ rotation.reshape(3, 3).T + model.geom_pos[geom]
+
+
+def _hull_vertices(points: np.ndarray) -> np.ndarray:
+    """The extreme point along any direction is a hull vertex, so the hull is all a lowest-point query needs."""
+    try:
+        return points[ConvexHull(points).vertices]
+    except QhullError:  # flat or degenerate meshes: keep every point
+        return points
+
+
+def _rotation_z_row(quat_wxyz: np.ndarray) -> np.ndarray:
+    """(T, 3) third row of the rotation matrix of unit quaternions (T, 4 wxyz)."""
+    quat = quat_wxyz / np.linalg.norm(quat_wxyz, axis=-1, keepdims=True)
+    w, x, y, z = quat[..., 0], quat[..., 1], quat[..., 2], quat[..., 3]
+    return np.stack([2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)], axis=-1)
+
+
+def _round(value: float) -> float:
+    return round(float(value), 3)

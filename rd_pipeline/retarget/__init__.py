@@ -1,0 +1,1 @@
+"""Retargeting human motion to a robot: scaled keypoint targets, foot contacts, IK with mink."""

@@ -1,0 +1,53 @@
+"""A mink limit that bounds each joint by its range and by how far it may move in one frame period."""
+
+from __future__ import annotations
+
+import mink
+import numpy as np
+
+
+class FrameStepLimit(mink.Limit):
+    """lower <= q + dq <= upper with bounds = joint range intersected with q_prev +- v_max * T.
+
+    mink's VelocityLimit bounds one solver step at the solver's dt; here several solver iterations
+    share one frame, so the bound is on the displacement from the previous *frame*. That makes the
+    finite-difference velocity of the output obey the limits by construction.
+    """
+
+    def __init__(self, dof_indices: np.ndarray, lower: np.ndarray, upper: np.ndarray, qpos_indices: np.ndarray,
+                 nv: int, max_step: np.ndarray, root_max_step: np.ndarray) -> None:
+        self.dof_indices, self.qpos_indices = dof_indices, qpos_indices
+        self.range_lower, self.range_upper, self.max_step = lower, upper, max_step
+        self.lower, self.upper = lower.copy(), upper.copy()
+        self.projection = np.zeros((len(dof_indices), nv))
+        self.projection[np.arange(len(dof_indices)), dof_indices] = 1.0
+        # The floating base (dofs 0-5) gets a per-frame step bound too: otherwise, when joints hit
+        # their rate limit, the solver throws the whole body around to reach the targets.
+        self.root_projection = np.zeros((6, nv))
+        self.root_projection[np.arange(6), np.arange(6)] = 1.0
+        self.root_max_step = root_max_step
+        self.root_budget = np.full(6, np.inf)
+        self.G = np.vstack([self.projection, -self.projection, self.root_projection, -self.root_projection])
+
+    def start_frame(self, previous_q: np.ndarray | None) -> None:
+        """Bounds for the next frame, around the previous frame's joint positions."""
+        if previous_q is None:
+            self.lower, self.upper = self.range_lower.copy(), self.range_upper.copy()
+            self.root_budget = np.full(6, np.inf)
+            return
+        self.root_budget = self.root_max_step.copy()
+        joints = previous_q[self.qpos_indices]
+        self.lower = np.maximum(self.range_lower, joints - self.max_step)
+        self.upper = np.minimum(self.range_upper, joints + self.max_step)
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt  # bounds are on the displacement itself
+        joints = configuration.q[self.qpos_indices]
+        # A small inward margin keeps the solution inside despite solver tolerances.
+        h = np.concatenate([self.upper - joints, joints - self.lower]) - 1e-7
+        root = np.minimum(self.root_budget, 1e6)
+        return mink.Constraint(G=self.G, h=np.concatenate([np.maximum(h, 0.0), root, root]))
+
+    def spend_root_step(self, root_velocity: np.ndarray) -> None:
+        """Iterations within a frame share the frame's root step budget."""
+        self.root_budget = np.maximum(self.root_budget - np.abs(root_velocity), 0.0)

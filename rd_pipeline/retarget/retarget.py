@@ -1,0 +1,83 @@
+"""The retargeting pipeline: targets from the human, IK frame by frame, feet kept above the ground."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.evaluation.retarget_quality import FootMeshes
+from rd_pipeline.motion.contact import ContactThresholds
+from rd_pipeline.motion.human import HumanMotion
+from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
+from rd_pipeline.retarget.smoothing import smooth_cover
+from rd_pipeline.retarget.ik import IkSettings, IkWeights, RetargetIk
+from rd_pipeline.retarget.targets import RetargetTargets, TargetShaping, build_targets
+from rd_pipeline.robots import Robot
+
+
+@dataclass(frozen=True)
+class RetargetResult:
+    """A retargeted motion and the targets it was solved for."""
+
+    reference: ReferenceMotion
+    """The robot reference motion."""
+    targets: RetargetTargets
+    """Scaled-human keypoint targets (for the keypoint error and for viewing)."""
+    ground_lift_max_m: float
+    """Largest lift the ground pass had to apply."""
+
+
+def retarget(
+    human: HumanMotion, robot: Robot, fps: float, contact: ContactThresholds, shape: TargetShaping,
+    weights: IkWeights, settings: IkSettings,
+    track: Callable[[Iterable[int], int], Iterable[int]] = lambda frames, total: frames,
+) -> RetargetResult:
+    """Retarget `human` onto `robot` at `fps`; `track` wraps the frame loops (progress bars).
+
+    Per-frame IK against the targets, then a sequence-level pass: the whole trajectory is smoothed
+    and the feet are put back on their targets by a leg-only IK that stays near the smoothed pose.
+    """
+    if not np.all(np.isfinite(human.pos_w)):
+        frame = int(np.argwhere(~np.isfinite(human.pos_w))[0, 0])
+        raise PipelineError(f"human motion has a non-finite position at frame {frame}")
+    if human.duration_s < 1.0 / fps:
+        raise PipelineError(f"clip of {human.duration_s:.4f} s is shorter than one frame period (1/{fps:g} s)")
+    feet = FootMeshes.from_robot(robot)
+    targets = build_targets(human, robot, fps, feet.vertices, contact, shape)
+    ik = RetargetIk(robot, targets, weights, settings)
+    qpos = ik.solve(track(range(targets.n_frames), targets.n_frames))
+    if settings.trajectory_smoothing_s > 0:
+        qpos = _smooth_trajectory(robot, qpos, settings.trajectory_smoothing_s * fps)
+        qpos = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames))
+    reference = _reference(robot, qpos, targets)
+    lowest = feet.lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names).min(axis=1)
+    lift = smooth_cover(np.maximum(-lowest, 0.0), fps, 0.05)
+    if lift.any():
+        qpos[:, 2] += lift
+        reference = _reference(robot, qpos, targets)
+    return RetargetResult(reference=reference, targets=targets, ground_lift_max_m=float(lift.max()))
+
+
+def _smooth_trajectory(robot: Robot, qpos: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian smoothing of the joint and root trajectories (sequence-level), back inside the joint range.
+
+    Smoothing averages neighbouring frames, so it never raises a frame-to-frame speed above the
+    largest one it started from; the velocity limits the IK enforced still hold.
+    """
+    smoothed = gaussian_filter1d(qpos, sigma, axis=0, mode="nearest")
+    quat = smoothed[:, 3:7]
+    smoothed[:, 3:7] = quat / np.linalg.norm(quat, axis=1, keepdims=True)
+    lower, upper = robot.joint_range.T
+    smoothed[:, robot.qpos_indices] = np.clip(smoothed[:, robot.qpos_indices], lower, upper)
+    return smoothed
+
+
+def _reference(robot: Robot, qpos: np.ndarray, targets: RetargetTargets) -> ReferenceMotion:
+    return reference_from_joint_trajectory(
+        robot, targets.fps, qpos[:, :3].copy(), qpos[:, 3:7].copy(), qpos[:, robot.qpos_indices].copy(),
+        targets.foot_contact,
+    )

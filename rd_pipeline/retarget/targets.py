@@ -1,0 +1,343 @@
+"""From a human motion to the robot's IK targets: per-limb scaling, frames, contacts, planted feet.
+
+Everything here is computed from the human skeleton and the robot model; nothing is tuned per clip.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from scipy.interpolate import interp1d
+from scipy.ndimage import gaussian_filter1d
+from scipy.spatial.transform import Rotation, Slerp
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion.contact import ContactThresholds, label_contacts
+from rd_pipeline.motion.human import HumanMotion
+from rd_pipeline.retarget.smoothing import smooth_cover
+from rd_pipeline.retarget.frames import frame_from_axes, yaw_and_pitch, yaw_pitch_frame
+from rd_pipeline.robots import Robot
+
+# LAFAN1 joints that define frames; the robot side uses whichever bodies the config maps to them.
+PELVIS, TORSO = "Hips", "Spine2"
+FEET = ("LeftFoot", "RightFoot")
+TOES = ("LeftToe", "RightToe")
+HIPS_LR = ("LeftUpLeg", "RightUpLeg")
+SHOULDERS_LR = ("LeftArm", "RightArm")
+LOWER_SPINE = "Spine"
+TARGETS_FILE = "targets.npz"
+"""File name of the keypoint targets inside a retarget artifact."""
+
+
+@dataclass(frozen=True)
+class RetargetTargets:
+    """Per-frame targets for the robot's key bodies at the output rate."""
+
+    fps: float
+    """Frame rate of the targets (the reference-motion rate)."""
+    bodies: tuple[str, ...]
+    """Robot bodies with a position target, in `positions` order."""
+    human_joints: tuple[str, ...]
+    """The human joint each body follows."""
+    positions: np.ndarray
+    """(T, K, 3) target positions (scaled human; feet planted while in contact)."""
+    orientations: dict[str, np.ndarray]
+    """Body -> (T, 3, 3) target orientations (pelvis, torso, feet)."""
+    foot_contact: np.ndarray
+    """(T, 2) left/right foot planted, from the human feet."""
+    sole_height: np.ndarray
+    """(2,) height of each robot foot body above its sole when the foot is flat."""
+    human_scale: float
+    """Global human-to-robot scale (leg-length ratio) applied to the root."""
+
+    @property
+    def n_frames(self) -> int:
+        return self.positions.shape[0]
+
+    def save(self, path) -> None:
+        """Keypoint targets for viewing beside the robot (the orientations are not needed there)."""
+        np.savez(path, fps=self.fps, bodies=np.array(self.bodies), human_joints=np.array(self.human_joints),
+                 positions=self.positions, foot_contact=self.foot_contact)
+
+
+def resample_human(human: HumanMotion, fps: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Joint positions (T', J, 3) and rotation matrices (T', J, 3, 3) at `fps`, same duration as the source."""
+    n_source = human.n_frames
+    n_target = int(round(n_source * fps / human.fps))
+    if n_target < 2:
+        raise PipelineError(f"human motion of {n_source} frames is shorter than two frames at {fps} Hz")
+    source_t = np.arange(n_source) / human.fps
+    target_t = np.minimum(np.arange(n_target) / fps, source_t[-1])
+    positions = interp1d(source_t, human.pos_w, kind="cubic" if n_source > 3 else "linear", axis=0)(target_t)
+    rotations = np.empty((n_target, len(human.names), 3, 3))
+    for j in range(len(human.names)):
+        source = Rotation.from_quat(human.quat_w[:, j][:, [1, 2, 3, 0]])
+        rotations[:, j] = Slerp(source_t, source)(target_t).as_matrix()
+    return positions, rotations, list(human.names)
+
+
+def robot_rest_positions(robot: Robot, bodies: list[str]) -> np.ndarray:
+    """(K, 3) body positions with every joint at zero (Unitree frames are world-aligned there)."""
+    data = mujoco.MjData(robot.model)
+    data.qpos[3] = 1.0
+    mujoco.mj_kinematics(robot.model, data)
+    return np.array([data.xpos[robot.body_ids[b]] for b in bodies])
+
+
+def robot_rest_rotation(robot: Robot, body: str) -> np.ndarray:
+    data = mujoco.MjData(robot.model)
+    data.qpos[3] = 1.0
+    mujoco.mj_kinematics(robot.model, data)
+    return data.xmat[robot.body_ids[body]].reshape(3, 3).copy()
+
+
+@dataclass(frozen=True)
+class TargetShaping:
+    """How the human motion is shaped into robot targets."""
+
+    smoothing_s: float = 0.12
+    """Gaussian sigma (s) on the human joint paths; mocap jitter would otherwise become joint jerk."""
+    swing_clearance_m: float = 0.03
+    """Height the lowest point of a swinging foot clears the floor by, once lifted."""
+    swing_lift_time_s: float = 0.1
+    """Time a swing foot takes to rise to its clearance before it travels (and to come down after)."""
+    reach_fraction: float = 0.97
+    """Fraction of the straight-leg length a planted leg may use; beyond it the body is lowered."""
+
+
+def build_targets(
+    human: HumanMotion, robot: Robot, fps: float, foot_vertices: tuple[np.ndarray, np.ndarray], contact: ContactThresholds,
+    shape: TargetShaping = TargetShaping(),
+) -> RetargetTargets:
+    config = robot.config
+    sole_height = np.array([-vertices[:, 2].min() for vertices in foot_vertices])
+    body_for = {human_joint: body for body, human_joint in config.retarget_map.items()}
+    for needed in (PELVIS, TORSO, *FEET, *HIPS_LR, *SHOULDERS_LR):
+        if needed not in body_for:
+            raise PipelineError(f"{config.source}: bodies.retarget must map a body to LAFAN1 joint '{needed}'")
+    missing = [j for j in config.retarget_map.values() if j not in human.names]
+    if missing:
+        raise PipelineError(f"{config.source}: bodies.retarget names human joint '{missing[0]}', not in the skeleton")
+
+    human_pos, human_rot, names = resample_human(human, fps)
+    if shape.smoothing_s > 0:
+        human_pos = gaussian_filter1d(human_pos, shape.smoothing_s * fps, axis=0, mode="nearest")
+    index = {name: i for i, name in enumerate(names)}
+    joints = list(config.retarget_map.values())
+    bodies = list(config.retarget_map.keys())
+    rest = dict(zip(joints, robot_rest_positions(robot, bodies)))
+
+    # Keypoints on the same rigid part as their parent (hips on the pelvis, torso and shoulders on
+    # the torso) keep the robot's own offset, turned by the parent's target orientation; limbs
+    # (knees, feet, elbows, hands) follow the human direction with the robot's segment length.
+    parent_of = {joint: _mapped_ancestor(human, joint, set(joints)) for joint in joints}
+    leg_human = sum(_median_length(human_pos, index, a, b) for a, b in (("LeftUpLeg", "LeftLeg"), ("LeftLeg", "LeftFoot")))
+    leg_robot = sum(np.linalg.norm(rest[a] - rest[b]) for a, b in (("LeftUpLeg", "LeftLeg"), ("LeftLeg", "LeftFoot")))
+    root_scale = float(leg_robot / leg_human)
+    orientations = _orientations(human_pos, index, robot, body_for, rest)
+    rigid_frame = {PELVIS: orientations[body_for[PELVIS]], TORSO: orientations[body_for[TORSO]]}
+    rest_rotation = {joint: robot_rest_rotation(robot, body_for[joint]) for joint in rigid_frame}
+    targets: dict[str, np.ndarray] = {PELVIS: human_pos[:, index[PELVIS]] * root_scale}
+    for joint in _topological(parent_of):
+        parent = parent_of[joint]
+        if parent is None:
+            continue
+        if parent in rigid_frame:
+            offset_in_parent = rest_rotation[parent].T @ (rest[joint] - rest[parent])
+            targets[joint] = targets[parent] + rigid_frame[parent] @ offset_in_parent
+        else:
+            segment = human_pos[:, index[joint]] - human_pos[:, index[parent]]
+            scale = np.linalg.norm(rest[joint] - rest[parent]) / _median_length(human_pos, index, joint, parent)
+            targets[joint] = targets[parent] + scale * segment
+
+    contact = _human_contacts(human_pos, index, fps, contact)
+    # Lift or lower everything so planted feet sit at the robot's sole height (robot and human
+    # ankles are not at the same height in proportion to the legs).
+    foot_z = np.stack([targets[f][:, 2] for f in FEET], axis=1)
+    planted = foot_z[contact] if contact.any() else foot_z.min(axis=1)
+    shift = float(np.median(sole_height)) - float(np.median(planted))
+    for joint in targets:
+        targets[joint] = targets[joint] + np.array([0.0, 0.0, shift])
+
+    for side, (foot, toe) in enumerate(zip(FEET, TOES)):
+        forward = human_pos[:, index[toe]] - human_pos[:, index[foot]]
+        position, rotation = _plant_foot(
+            targets[foot], forward, human_rot[:, index[foot]], contact[:, side], foot_vertices[side], fps,
+            shape.swing_clearance_m, shape.swing_lift_time_s,
+        )
+        targets[foot] = position
+        offset = robot_rest_rotation(robot, body_for[foot])
+        orientations[body_for[foot]] = rotation @ offset
+
+    _keep_legs_reachable(targets, rest, fps, shape.reach_fraction)
+    return RetargetTargets(
+        fps=fps, bodies=tuple(bodies), human_joints=tuple(joints),
+        positions=np.stack([targets[j] for j in joints], axis=1), orientations=orientations,
+        foot_contact=contact, sole_height=np.asarray(sole_height, dtype=float), human_scale=root_scale,
+    )
+
+
+def _keep_legs_reachable(targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], fps: float, fraction: float) -> None:
+    """Lower the body (not the feet) where a planted foot would need a leg longer than the robot's.
+
+    The drop is a smooth cover of the per-frame requirement, so it adds no jerk.
+    """
+    need = np.zeros(targets[PELVIS].shape[0])
+    for hip, foot in zip(HIPS_LR, FEET):
+        reach = fraction * np.linalg.norm(rest[hip] - rest[foot])  # legs are straight in the rest pose
+        delta = targets[hip] - targets[foot]
+        horizontal = np.minimum(np.linalg.norm(delta[:, :2], axis=1), reach)
+        need = np.maximum(need, delta[:, 2] - np.sqrt(reach**2 - horizontal**2))
+    drop = smooth_cover(np.maximum(need, 0.0), fps, 0.1)
+    for joint in targets:
+        if joint not in FEET:
+            targets[joint] = targets[joint] - drop[:, None] * np.array([0.0, 0.0, 1.0])
+
+
+def _mapped_ancestor(human: HumanMotion, joint: str, mapped: set[str]) -> str | None:
+    parent = int(human.parents[human.names.index(joint)])
+    while parent >= 0:
+        if human.names[parent] in mapped:
+            return human.names[parent]
+        parent = int(human.parents[parent])
+    return None
+
+
+def _topological(parent_of: dict[str, str | None]) -> list[str]:
+    ordered: list[str] = []
+    while len(ordered) < len(parent_of):
+        for joint, parent in parent_of.items():
+            if joint not in ordered and (parent is None or parent in ordered):
+                ordered.append(joint)
+    return ordered
+
+
+def _median_length(pos: np.ndarray, index: dict[str, int], a: str, b: str) -> float:
+    return float(np.median(np.linalg.norm(pos[:, index[a]] - pos[:, index[b]], axis=-1)))
+
+
+def _human_contacts(pos: np.ndarray, index: dict[str, int], fps: float, thresholds: ContactThresholds) -> np.ndarray:
+    """Foot contact from the lower of ankle and toe, each relative to its own planted height."""
+    heights, points = [], []
+    for foot, toe in zip(FEET, TOES):
+        ankle_z, toe_z = pos[:, index[foot], 2], pos[:, index[toe], 2]
+        heights.append(np.minimum(ankle_z - np.percentile(ankle_z, 2), toe_z - np.percentile(toe_z, 2)))
+        points.append(0.5 * (pos[:, index[foot]] + pos[:, index[toe]]))
+    foot_points = np.stack(points, axis=1)
+    foot_points[..., 2] = np.stack(heights, axis=1)
+    return label_contacts(foot_points, fps, 0.0, thresholds)
+
+
+def _orientations(
+    pos: np.ndarray, index: dict[str, int], robot: Robot,
+    body_for: dict[str, str], rest: dict[str, np.ndarray],
+) -> dict[str, np.ndarray]:
+    """Pelvis and torso frames from keypoints, times the robot's rest offset for the same construction."""
+    def pelvis_frame(p):  # up along the spine, left across the hips
+        return frame_from_axes(p[TORSO] - p[PELVIS], p[HIPS_LR[0]] - p[HIPS_LR[1]])
+
+    def torso_frame(p):  # up from the lower spine to the shoulders, left across the shoulders
+        shoulders = 0.5 * (p[SHOULDERS_LR[0]] + p[SHOULDERS_LR[1]])
+        return frame_from_axes(shoulders - p[LOWER_SPINE], p[SHOULDERS_LR[0]] - p[SHOULDERS_LR[1]])
+
+    human = {name: pos[:, i] for name, i in index.items()}
+    # The robot's rest frames use the same construction; robots have no lower-spine body, so the
+    # pelvis stands in for it, and the pelvis "up" is vertical by definition of the rest pose (some
+    # torso bodies sit right at the pelvis origin).
+    robot_rest = {**rest, LOWER_SPINE: rest[PELVIS], TORSO: rest[PELVIS] + np.array([0.0, 0.0, 1.0])}
+    robot_rest_torso = {**robot_rest, TORSO: rest[TORSO]}
+    out = {}
+    for joint, frame, rest_points in ((PELVIS, pelvis_frame, robot_rest), (TORSO, torso_frame, robot_rest_torso)):
+        body = body_for[joint]
+        offset = frame(rest_points).T @ robot_rest_rotation(robot, body)
+        out[body] = frame(human) @ offset
+    return out
+
+
+def _plant_foot(
+    free: np.ndarray, forward: np.ndarray, human_rotation: np.ndarray, contact: np.ndarray, sole_vertices: np.ndarray,
+    fps: float, clearance: float, lift_time_s: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Foot targets: fixed and flat while planted; in swing, the human path bent to meet the plants.
+
+    Swing orientation follows the human foot joint (its toe line is useless as a heading when the
+    foot points down), through the constant offset that makes it flat and aligned during plants.
+    """
+    n = free.shape[0]
+    sole = float(-sole_vertices[:, 2].min())
+    heading = np.unwrap(yaw_and_pitch(forward)[0])
+    position = free.copy()
+    planted_weight = np.zeros(n)
+    lift = np.zeros(n)
+    anchors = []
+    for start, end in _runs(contact):
+        anchors.append((start, end, np.array([*free[start, :2], sole])))
+        position[start:end] = anchors[-1][2]
+        heading[start:end] = np.mean(heading[start:end])
+        planted_weight[start:end] = 1.0
+    flat = Rotation.from_matrix(yaw_pitch_frame(heading, np.zeros(n)))
+    human = Rotation.from_matrix(human_rotation)
+    calibration = contact if contact.any() else np.ones(n, dtype=bool)
+    offset = (human[calibration].inv() * flat[calibration]).mean()
+    swinging = human * offset
+    # Swing: add a correction that blends from the previous plant's offset to the next one's, so
+    # the foot leaves and lands exactly where it is planted. A robot foot near the floor must not
+    # slide: it first rises to `clearance`, then travels, then comes down on its plant.
+    ramp = max(1, int(round(0.1 * fps)))
+    rise = max(1, int(round(lift_time_s * fps)))
+    edges = [0] + [x for start, end, _ in anchors for x in (start, end)] + [n]
+    for i in range(len(anchors) + 1):
+        a, b = edges[2 * i], edges[2 * i + 1]
+        if b <= a:
+            continue
+        before = anchors[i - 1][2] - free[a - 1] if i > 0 else None
+        after = anchors[i][2] - free[b] if i < len(anchors) else None
+        if before is None and after is None:  # no contact in the whole clip: only keep feet above ground
+            lift[:] = clearance
+            continue
+        before = after if before is None else before
+        after = before if after is None else after
+        t = np.arange(a, b)
+        since = t - a + 1 if i > 0 else np.full(b - a, n)
+        until = b - t if i < len(anchors) else np.full(b - a, n)
+        # Horizontal travel happens between the rise and the descent (time-warped human path).
+        hold = min(rise, (b - a) // 3)
+        lo, hi = (a - 1 if i > 0 else a), (b if i < len(anchors) else b - 1)
+        warp = lo + (hi - lo) * np.clip((t - lo - hold) / max(hi - lo - 2 * hold, 1), 0.0, 1.0)
+        path = np.stack([np.interp(warp, np.arange(n), free[:, k]) for k in range(3)], axis=1)
+        s = _smoothstep(np.clip((warp - lo) / max(hi - lo, 1), 0.0, 1.0))
+        position[a:b] = path + (1.0 - s)[:, None] * before + s[:, None] * after
+        lift[a:b] = clearance * _smoothstep(np.clip(np.minimum(since, until) / rise, 0.0, 1.0))
+        planted_weight[a:b] = 1.0 - _smoothstep(np.clip(np.minimum(since, until) / ramp, 0.0, 1.0))
+        # Near a plant, ease toward that plant's flat orientation.
+        nearest = np.where(since <= until, a - 1, b) if 0 < i < len(anchors) else np.full(b - a, a - 1 if i > 0 else b)
+        flat_near = flat[np.clip(nearest, 0, n - 1)]
+        delta = (swinging[a:b].inv() * flat_near).as_rotvec()
+        swinging_blended = swinging[a:b] * Rotation.from_rotvec(delta * planted_weight[a:b, None])
+        flat = _assign(flat, slice(a, b), swinging_blended)
+    rotation = flat.as_matrix()
+    # The lowest point of the (possibly pitched) foot clears the floor by `lift`: a pointed toe
+    # near the floor would otherwise drag along it.
+    depth = -np.einsum("tij,vj->tvi", rotation, sole_vertices)[..., 2].min(axis=1)
+    position[:, 2] = np.maximum(position[:, 2], lift + depth)
+    return position, rotation
+
+
+def _assign(rotations: Rotation, where: slice, values: Rotation) -> Rotation:
+    quats = rotations.as_quat()
+    quats[where] = values.as_quat()
+    return Rotation.from_quat(quats)
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, end) of each run of True."""
+    padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    edges = np.flatnonzero(np.diff(padded))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+def _smoothstep(s: np.ndarray) -> np.ndarray:
+    """Quintic ease (zero velocity and acceleration at both ends), so blends add little jerk."""
+    return s * s * s * (s * (6.0 * s - 15.0) + 10.0)

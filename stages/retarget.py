@@ -1,0 +1,81 @@
+"""`retarget`: human motion (parse) -> robot reference motion at 50 Hz by mink IK, with `quality.json`."""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rd_pipeline.artifacts.stage import Stage, StageContext
+from rd_pipeline.evaluation.retarget_quality import QUALITY_FILE, retarget_quality
+from rd_pipeline.motion.contact import ContactThresholds
+from rd_pipeline.motion.human import HUMAN_MOTION_FILE, HumanMotion
+from rd_pipeline.motion.reference import REFERENCE_FILE
+from rd_pipeline.retarget.ik import IkSettings, IkWeights
+from rd_pipeline.retarget.retarget import retarget
+from rd_pipeline.retarget.targets import TARGETS_FILE, TargetShaping
+from rd_pipeline.robots import load_robot
+from rd_pipeline.robots.assets import asset_path
+from rd_pipeline.robots.config import config_path, load_robot_config
+
+
+@dataclass(frozen=True)
+class RetargetParams:
+    """Output rate and the settings of each retargeting step (`--set retarget.weights.feet_position=50`)."""
+
+    fps: float = 50.0
+    """Frame rate of the reference motion."""
+    contact: ContactThresholds = ContactThresholds()
+    """When a human foot counts as planted."""
+    shape: TargetShaping = TargetShaping()
+    """How the human motion becomes robot targets."""
+    weights: IkWeights = IkWeights()
+    """IK task costs."""
+    ik: IkSettings = IkSettings()
+    """IK iterations, limits and the sequence-level smoothing."""
+
+
+def _inputs(robot: str | None, motion: str) -> dict[str, Path]:
+    assert robot is not None
+    config = load_robot_config(robot)
+    return {"robot_config": config_path(robot), "mjcf": asset_path(config.mjcf)}
+
+
+def _run(ctx: StageContext) -> dict[str, Any]:
+    p: RetargetParams = ctx.params
+    robot = load_robot(ctx.robot)
+    human = HumanMotion.load(ctx.upstream["human_motion"].path / HUMAN_MOTION_FILE)
+    began = time.perf_counter()
+    result = retarget(human, robot, p.fps, p.contact, p.shape, p.weights, p.ik,
+                      track=lambda frames, total: ctx.track(frames, total, f"IK {ctx.robot}"))
+    seconds = time.perf_counter() - began
+    reference, targets = result.reference, result.targets
+    reference.save(ctx.out_dir / REFERENCE_FILE)
+    targets.save(ctx.out_dir / TARGETS_FILE)
+    quality = retarget_quality(
+        robot, reference, keypoint_targets=targets.positions, keypoint_bodies=targets.bodies,
+        frames_per_s=reference.n_frames / seconds,
+    )
+    (ctx.out_dir / QUALITY_FILE).write_text(json.dumps(quality, indent=2) + "\n")
+    return {
+        **quality,
+        "fps": reference.fps,
+        "duration_s": round(reference.duration_s, 4),
+        "human_scale": round(targets.human_scale, 4),
+        "ground_lift_max_mm": round(1000 * result.ground_lift_max_m, 2),
+        "contact_fraction": [round(float(x), 4) for x in reference.foot_contact.mean(axis=0)],
+    }
+
+
+STAGE = Stage(
+    name="retarget",
+    version=1,
+    description="human motion -> robot reference motion at 50 Hz (mink IK) + quality.json",
+    params=RetargetParams,
+    provides="reference",
+    run=_run,
+    inputs=_inputs,
+    requires=("human_motion",),
+)

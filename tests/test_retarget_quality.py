@@ -1,0 +1,171 @@
+"""Retargeting quality metrics: on the real dataset, and on hand-built motions with known answers."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import mujoco
+import numpy as np
+import pytest
+
+from conftest import RETARGETED_DIR
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.evaluation.retarget_quality import FootMeshes, QualityThresholds, retarget_quality
+from rd_pipeline.motion.contact import ContactThresholds
+from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
+from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+from rd_pipeline.robots import Robot, load_robot
+
+KEYS = {
+    "frames", "fps_frames_per_s", "penetration_max_mm", "penetration_p95_mm", "skate_stance_mean_mm_s",
+    "joint_limit_violations", "velocity_limit_violations", "self_collision_frames", "jerk_mean",
+    "keypoint_error_mean_mm",
+}
+
+# G1 left arm swung in across the chest: the elbow sinks into the torso (found by a grid search over the
+# shoulder and elbow joints; no other configured pair touches).
+ELBOW_IN_TORSO = {"left_shoulder_pitch_joint": 0.25, "left_shoulder_roll_joint": -1.0, "left_elbow_joint": 0.0}
+
+
+@pytest.fixture(scope="module")
+def g1() -> Robot:
+    return load_robot("g1")
+
+
+@pytest.fixture(scope="module")
+def g1_dance(g1) -> tuple[ReferenceMotion, dict]:
+    path = RETARGETED_DIR / "g1" / "dance1_subject2.csv"
+    reference = import_retargeted_csv(path, g1, 30.0, 50.0, "cubic", ContactThresholds()).reference
+    return reference, retarget_quality(g1, reference)
+
+
+def _hand_built(robot: Robot, joint_pos: np.ndarray, fps: float = 50.0) -> ReferenceMotion:
+    """A motion standing still in the air (feet clear of the floor) with the given joint trajectory."""
+    n_frames = joint_pos.shape[0]
+    root_pos = np.tile([0.0, 0.0, 1.0], (n_frames, 1))
+    root_quat = np.tile([1.0, 0.0, 0.0, 0.0], (n_frames, 1))
+    return reference_from_joint_trajectory(
+        robot, fps, root_pos, root_quat, joint_pos, np.zeros((n_frames, 2), dtype=bool)
+    )
+
+
+def _standing(robot: Robot, n_frames: int) -> np.ndarray:
+    return np.tile(robot.config.default_pos, (n_frames, 1))
+
+
+def test_dataset_feet_sink_and_skate(g1_dance) -> None:
+    reference, quality = g1_dance
+    assert set(quality) == KEYS
+    json.dumps(quality)  # plain Python numbers only
+    assert quality["frames"] == reference.n_frames == 6575
+    assert quality["fps_frames_per_s"] is None and quality["keypoint_error_mean_mm"] is None
+    assert quality["penetration_max_mm"] > 20.0
+    assert 0.0 < quality["penetration_p95_mm"] <= quality["penetration_max_mm"]
+    assert quality["skate_stance_mean_mm_s"] > 100.0
+
+
+def test_penetration_matches_full_mesh_in_mujoco(g1, g1_dance) -> None:
+    """The hull-vertex shortcut gives the same lowest point as every vertex of the posed MuJoCo geom."""
+    reference, quality = g1_dance
+    lowest = FootMeshes.from_robot(g1).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
+    frame, foot = np.unravel_index(np.argmin(lowest), lowest.shape)
+    model, data = g1.model, mujoco.MjData(g1.model)
+    data.qpos[:3], data.qpos[3:7] = reference.root_pos[frame], reference.root_quat[frame]
+    data.qpos[g1.qpos_indices] = reference.joint_pos[frame]
+    mujoco.mj_kinematics(model, data)
+    body = g1.body_ids[g1.config.foot_bodies[foot]]
+    geom = next(g for g in range(model.ngeom) if model.geom_bodyid[g] == body and model.geom_dataid[g] >= 0)
+    mesh = model.geom_dataid[geom]
+    vertices = model.mesh_vert[model.mesh_vertadr[mesh]:model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]]
+    world_z = (vertices @ data.geom_xmat[geom].reshape(3, 3).T + data.geom_xpos[geom])[:, 2]
+    assert quality["penetration_max_mm"] == pytest.approx(-1000.0 * world_z.min(), abs=1e-3)
+
+
+def test_lifted_clip_neither_penetrates_nor_stands(g1, g1_dance) -> None:
+    reference, quality = g1_dance
+    lifted = dataclasses.replace(
+        reference, root_pos=reference.root_pos + [0.0, 0.0, 1.0], body_pos_w=reference.body_pos_w + [0.0, 0.0, 1.0]
+    )
+    lifted_quality = retarget_quality(g1, lifted)
+    assert lifted_quality["penetration_max_mm"] == 0.0
+    assert lifted_quality["penetration_p95_mm"] == 0.0
+    # No foot ever within the contact height: skating is averaged over no frames and reported as 0.0.
+    assert lifted_quality["skate_stance_mean_mm_s"] == 0.0
+    for key in ("joint_limit_violations", "velocity_limit_violations", "self_collision_frames", "jerk_mean"):
+        assert lifted_quality[key] == quality[key]
+
+
+def test_joint_beyond_its_limit_counts_frames(g1) -> None:
+    joint_pos = _standing(g1, 40)
+    elbow = g1.config.joint_names.index("left_elbow_joint")
+    joint_pos[10:17, elbow] = g1.joint_range[elbow, 1] + 0.1
+    assert retarget_quality(g1, _hand_built(g1, joint_pos))["joint_limit_violations"] == 7
+    assert retarget_quality(g1, _hand_built(g1, _standing(g1, 40)))["joint_limit_violations"] == 0
+
+
+@pytest.mark.parametrize(("speed_factor", "expected"), [(1.5, 9), (0.95, 0)])
+def test_velocity_ramp_counts_frames_above_the_limit(g1, speed_factor: float, expected: int) -> None:
+    fps, start, end = 1000.0, 100, 110
+    knee = g1.config.joint_names.index("left_knee_joint")
+    speed = speed_factor * g1.config.velocity_limit[knee]
+    joint_pos = _standing(g1, 300)
+    # A linear ramp over frames 100..110: central differences see the full speed strictly inside,
+    # half of it on the two corner frames.
+    joint_pos[:, knee] += speed / fps * np.clip(np.arange(300) - start, 0, end - start)
+    quality = retarget_quality(g1, _hand_built(g1, joint_pos, fps))
+    assert quality["velocity_limit_violations"] == expected
+    assert quality["joint_limit_violations"] == 0
+
+
+def test_jerk_of_a_cubic(g1) -> None:
+    a, fps = 0.5, 50.0
+    t = np.arange(50) / fps
+    joint_pos = _standing(g1, 50) + a * t[:, None] ** 3
+    # The third difference of a cubic is exact, so every frame (ends included) sees d3q/dt3 = 6a.
+    jerk = retarget_quality(g1, _hand_built(g1, joint_pos, fps))["jerk_mean"]
+    assert jerk == pytest.approx(6.0 * a, rel=1e-6)
+
+
+def test_elbow_in_torso_counts_as_self_collision(g1) -> None:
+    pose = g1.config.default_pos.copy()
+    for joint, value in ELBOW_IN_TORSO.items():
+        pose[g1.config.joint_names.index(joint)] = value
+    joint_pos = _standing(g1, 30)
+    joint_pos[5:11] = pose
+    reference = _hand_built(g1, joint_pos)
+
+    # Hand check with MuJoCo: the elbow is well inside the torso, far beyond the 5 mm threshold.
+    model, data = g1.model, mujoco.MjData(g1.model)
+    data.qpos[:3], data.qpos[3:7] = reference.root_pos[5], reference.root_quat[5]
+    data.qpos[g1.qpos_indices] = pose
+    mujoco.mj_kinematics(model, data)
+    elbow, torso = (
+        [g for g in range(model.ngeom) if model.geom_bodyid[g] == g1.body_ids[b] and model.geom_contype[g]]
+        for b in ("left_elbow_link", "torso_link")
+    )
+    depth = min(mujoco.mj_geomDistance(model, data, e, t, 1.0, None) for e in elbow for t in torso)
+    assert depth < -0.02
+
+    assert retarget_quality(g1, reference)["self_collision_frames"] == 6
+    assert retarget_quality(g1, _hand_built(g1, _standing(g1, 30)))["self_collision_frames"] == 0
+    # A deeper threshold than the penetration forgives it.
+    deep = QualityThresholds(self_collision_depth_m=-depth + 0.01)
+    assert retarget_quality(g1, reference, deep)["self_collision_frames"] == 0
+
+
+def test_keypoint_error(g1) -> None:
+    reference = _hand_built(g1, _standing(g1, 20))
+    bodies = ["left_elbow_link", "right_ankle_roll_link", "pelvis"]
+    exact = reference.body_pos_w[:, [reference.body_names.index(b) for b in bodies]]
+    assert retarget_quality(g1, reference, keypoint_targets=exact, keypoint_bodies=bodies)[
+        "keypoint_error_mean_mm"
+    ] == 0.0
+    shifted = exact + [0.018, 0.0, -0.024]  # 3 cm
+    quality = retarget_quality(g1, reference, keypoint_targets=shifted, keypoint_bodies=bodies, frames_per_s=123.4)
+    assert quality["keypoint_error_mean_mm"] == pytest.approx(30.0, abs=1e-3)
+    assert quality["fps_frames_per_s"] == 123.4
+    with pytest.raises(PipelineError, match="shape"):
+        retarget_quality(g1, reference, keypoint_targets=exact[:, :2], keypoint_bodies=bodies)
+    with pytest.raises(PipelineError, match="not among"):
+        retarget_quality(g1, reference, keypoint_targets=exact, keypoint_bodies=["left_elbow_link", "nose", "pelvis"])
