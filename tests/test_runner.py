@@ -38,7 +38,7 @@ def test_source_choice(monkeypatch: pytest.MonkeyPatch) -> None:
     assert resolve_source("g1", "dance1_subject2", None) == "bvh"
     assert resolve_source("h1_2", "dance2_subject4", None) == "csv"
     assert resolve_source("g1", "dance1_subject2", "csv") == "csv"
-    assert [s.name for s in _pipeline("g1", "dance1_subject2").chain()][0] == "parse"
+    assert [s.name for s in _pipeline("g1", "dance1_subject2").chain()] == ["parse", "retarget"]
     assert [s.name for s in _pipeline("h1_2", "dance2_subject4").chain()] == ["import"]
     with pytest.raises(PipelineError, match=r"no data for motion 'dance9_subject1'"):
         resolve_source("g1", "dance9_subject1", None)
@@ -79,7 +79,7 @@ def test_params_change_the_key_and_the_old_artifact_turns_stale(artifacts: Path)
 
 def test_selection_errors() -> None:
     pipeline = _pipeline("h1_2", "dance2_subject4")
-    with pytest.raises(PipelineError, match=r"^--until: unknown stage 'train' \(stages: parse, import\)$"):
+    with pytest.raises(PipelineError, match=r"^--until: unknown stage 'train' \(stages: parse, retarget, import\)$"):
         pipeline.select(None, "train", None)
     with pytest.raises(PipelineError, match=r"^--only: stage 'parse' is not in the csv pipeline for h1_2/dance2_subject4"):
         pipeline.select(None, None, "parse")

@@ -7,6 +7,7 @@ from pathlib import Path
 from rerun.chunk import RrdReader
 
 from conftest import cli
+from rd_pipeline.robots import load_robot
 
 
 def _rows_per_entity(path: Path) -> dict[str, int]:
@@ -17,16 +18,24 @@ def _rows_per_entity(path: Path) -> dict[str, int]:
     return rows
 
 
-def test_view_human_skeleton(artifacts: Path, tmp_path: Path) -> None:
+def test_view_human_and_retargeted_robot(artifacts: Path, tmp_path: Path) -> None:
     out = tmp_path / "dance.rrd"
-    result = cli("view", "--robot", "g1", "--motion", "dance1_subject2", "--out", str(out))
+    result = cli("view", "--robot", "g1", "--motion", "dance1_subject1", "--out", str(out))
     assert result.returncode == 0, result.stderr
     rows = _rows_per_entity(out)
-    assert rows == {"/human/joints": 3945, "/human/bones": 3945}
+    assert rows.pop("/human/joints") == 3945 and rows.pop("/human/bones") == 3945
+    assert rows.pop("/targets/retarget") == 6575
+    # One moving mesh per G1 body (all 24 have a visual mesh), every frame of the 50 Hz reference.
+    assert sorted(rows) == sorted(f"/robot/retarget/{b}" for b in load_robot("g1").body_names)
+    assert set(rows.values()) == {6575}
+    static = {c.entity_path for c in RrdReader(str(out)).store().stream() if c.is_static}
+    assert "/robot/retarget/left_ankle_roll_link" in static  # the mesh itself
 
 
 def test_view_imported_robot_reference(artifacts: Path, tmp_path: Path) -> None:
     out = tmp_path / "h1.rrd"
     result = cli("view", "--robot", "h1", "--motion", "dance2_subject3", "--out", str(out))
     assert result.returncode == 0, result.stderr
-    assert _rows_per_entity(out) == {"/robot/import/joints": 11285, "/robot/import/bones": 11285}
+    rows = _rows_per_entity(out)
+    assert sorted(rows) == sorted(f"/robot/import/{b}" for b in load_robot("h1").body_names)
+    assert set(rows.values()) == {11285}

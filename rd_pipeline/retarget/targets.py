@@ -66,8 +66,10 @@ def resample_human(human: HumanMotion, fps: float) -> tuple[np.ndarray, np.ndarr
     """Joint positions (T', J, 3) and rotation matrices (T', J, 3, 3) at `fps`, same duration as the source."""
     n_source = human.n_frames
     n_target = int(round(n_source * fps / human.fps))
-    if n_target < 2:
-        raise PipelineError(f"human motion of {n_source} frames is shorter than two frames at {fps} Hz")
+    if n_source < 2 or n_target < 2:
+        raise PipelineError(
+            f"clip of {n_source} frame(s) ({human.duration_s:.4f} s) is too short: retargeting needs two frames at {fps:g} Hz"
+        )
     source_t = np.arange(n_source) / human.fps
     target_t = np.minimum(np.arange(n_target) / fps, source_t[-1])
     positions = interp1d(source_t, human.pos_w, kind="cubic" if n_source > 3 else "linear", axis=0)(target_t)
@@ -152,6 +154,7 @@ def build_targets(
             scale = np.linalg.norm(rest[joint] - rest[parent]) / _median_length(human_pos, index, joint, parent)
             targets[joint] = targets[parent] + scale * segment
 
+    _match_stance_width(targets, rest, rigid_frame[PELVIS])
     contact = _human_contacts(human_pos, index, fps, contact)
     # Lift or lower everything so planted feet sit at the robot's sole height (robot and human
     # ankles are not at the same height in proportion to the legs).
@@ -161,11 +164,12 @@ def build_targets(
     for joint in targets:
         targets[joint] = targets[joint] + np.array([0.0, 0.0, shift])
 
+    pelvis_yaw = np.unwrap(yaw_and_pitch(orientations[body_for[PELVIS]][:, :, 0])[0])
     for side, (foot, toe) in enumerate(zip(FEET, TOES)):
         forward = human_pos[:, index[toe]] - human_pos[:, index[foot]]
         position, rotation = _plant_foot(
             targets[foot], forward, human_rot[:, index[foot]], contact[:, side], foot_vertices[side], fps,
-            shape.swing_clearance_m, shape.swing_lift_time_s,
+            shape.swing_clearance_m, shape.swing_lift_time_s, pelvis_yaw, _leg_yaw_range(robot, body_for[foot]),
         )
         targets[foot] = position
         offset = robot_rest_rotation(robot, body_for[foot])
@@ -177,6 +181,21 @@ def build_targets(
         positions=np.stack([targets[j] for j in joints], axis=1), orientations=orientations,
         foot_contact=contact, sole_height=np.asarray(sole_height, dtype=float), human_scale=root_scale,
     )
+
+
+def _match_stance_width(targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], pelvis: np.ndarray) -> None:
+    """Move each leg sideways (in the pelvis frame) so the typical stance width is the robot's own.
+
+    A narrow human stance scaled onto a robot with wide hips and little hip roll (H1: +-0.43 rad)
+    asks for feet the robot cannot bring together; the offset is the robot's rest foot width minus
+    the clip's median, a constant per leg.
+    """
+    for knee, foot in (("LeftLeg", "LeftFoot"), ("RightLeg", "RightFoot")):
+        lateral = np.einsum("ti,ti->t", pelvis[:, :, 1], targets[foot] - targets[PELVIS])
+        robot_lateral = float((rest[foot] - rest[PELVIS])[1])  # rest frames are world-aligned
+        shift = (robot_lateral - float(np.median(lateral))) * pelvis[:, :, 1]
+        targets[knee] = targets[knee] + shift
+        targets[foot] = targets[foot] + shift
 
 
 def _keep_legs_reachable(targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], fps: float, fraction: float) -> None:
@@ -258,7 +277,7 @@ def _orientations(
 
 def _plant_foot(
     free: np.ndarray, forward: np.ndarray, human_rotation: np.ndarray, contact: np.ndarray, sole_vertices: np.ndarray,
-    fps: float, clearance: float, lift_time_s: float,
+    fps: float, clearance: float, lift_time_s: float, pelvis_yaw: np.ndarray, yaw_range: tuple[float, float],
 ) -> tuple[np.ndarray, np.ndarray]:
     """Foot targets: fixed and flat while planted; in swing, the human path bent to meet the plants.
 
@@ -275,7 +294,10 @@ def _plant_foot(
     for start, end in _runs(contact):
         anchors.append((start, end, np.array([*free[start, :2], sole])))
         position[start:end] = anchors[-1][2]
-        heading[start:end] = np.mean(heading[start:end])
+        # A planted foot keeps one heading, within what the leg's vertical-axis joints can turn from
+        # the pelvis (the H1's hip yaw only spans +-0.43 rad).
+        relative = _wrap(np.mean(heading[start:end]) - np.mean(pelvis_yaw[start:end]))
+        heading[start:end] = np.mean(pelvis_yaw[start:end]) + np.clip(relative, *yaw_range)
         planted_weight[start:end] = 1.0
     flat = Rotation.from_matrix(yaw_pitch_frame(heading, np.zeros(n)))
     human = Rotation.from_matrix(human_rotation)
@@ -323,6 +345,31 @@ def _plant_foot(
     depth = -np.einsum("tij,vj->tvi", rotation, sole_vertices)[..., 2].min(axis=1)
     position[:, 2] = np.maximum(position[:, 2], lift + depth)
     return position, rotation
+
+
+def _wrap(angle: float) -> float:
+    return float((angle + np.pi) % (2 * np.pi) - np.pi)
+
+
+def _leg_yaw_range(robot: Robot, foot: str) -> tuple[float, float]:
+    """How far the foot can turn about the vertical from the pelvis: summed ranges of the hinge
+    joints between them whose axis is vertical in the rest pose (read from the model)."""
+    model = robot.model
+    data = mujoco.MjData(model)
+    data.qpos[3] = 1.0
+    mujoco.mj_kinematics(model, data)
+    low = high = 0.0
+    body = robot.body_ids[foot]
+    while body > 0 and model.body_jntnum[body] >= 0:
+        for joint in range(model.body_jntadr[body], model.body_jntadr[body] + model.body_jntnum[body]):
+            if model.jnt_type[joint] != mujoco.mjtJoint.mjJNT_HINGE:
+                continue
+            axis = data.xaxis[joint]
+            if abs(axis[2]) > 0.9:
+                lo, hi = sorted(model.jnt_range[joint] * np.sign(axis[2]))
+                low, high = low + lo, high + hi
+        body = model.body_parentid[body]
+    return low, high
 
 
 def _assign(rotations: Rotation, where: slice, values: Rotation) -> Rotation:

@@ -9,7 +9,10 @@ import numpy as np
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HUMAN_MOTION_FILE, HumanMotion
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
-from rd_pipeline.viz.rerun_view import log_human, log_reference, open_recording
+from rd_pipeline.retarget.targets import TARGETS_FILE
+from rd_pipeline.viz.rerun_view import log_human, log_points, log_robot_meshes, open_recording
+
+TARGET_COLOR = (220, 60, 60)
 
 
 def record_motion(robot: str, motion: str, artifact_dirs: dict[str, Path], out: Path | None) -> Path | None:
@@ -27,8 +30,10 @@ def record_motion(robot: str, motion: str, artifact_dirs: dict[str, Path], out: 
         model = load_robot(robot).model
         for stage, path in reference_files:
             reference = ReferenceMotion.load(path)
-            # Body ids start at 1 (0 is the world); a parent id of 0 marks a root.
-            parents = np.array([model.body_parentid[i] - 1 for i in range(1, model.nbody)])
-            log_reference(rec, reference, parents, entity=f"robot/{stage}")
+            log_robot_meshes(rec, model, reference, entity=f"robot/{stage}")
+            targets = path.parent / TARGETS_FILE
+            if targets.is_file():
+                with np.load(targets) as data:
+                    log_points(rec, f"targets/{stage}", data["positions"], reference.fps, TARGET_COLOR, 0.015)
     rec.flush()
     return out

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import mujoco
 import numpy as np
 import rerun as rr
 
@@ -50,9 +51,53 @@ def log_human(rec: rr.RecordingStream, human: HumanMotion, entity: str = "human"
     _log_skeleton(rec, entity, human.pos_w, human.parents, human.fps, HUMAN_COLOR, 0.02)
 
 
-def log_reference(rec: rr.RecordingStream, reference: ReferenceMotion, body_parents: np.ndarray, entity: str) -> None:
-    """A robot reference motion as its body frames linked to their parents."""
-    _log_skeleton(rec, entity, reference.body_pos_w, body_parents, reference.fps, ROBOT_COLOR, 0.02)
+def log_robot_meshes(
+    rec: rr.RecordingStream, model: mujoco.MjModel, reference: ReferenceMotion, entity: str,
+    color: tuple[int, int, int] = ROBOT_COLOR,
+) -> None:
+    """The robot's visual meshes, one static mesh per body, moved by per-frame body transforms.
+
+    The meshes are decimated to their vertex sets as MuJoCo compiled them; each body's geoms are
+    merged into one mesh in the body frame, so a frame costs one transform per body.
+    """
+    times = _times(reference.n_frames, reference.fps)
+    for b, name in enumerate(reference.body_names):
+        body_id = model.body(name).id
+        vertices, faces = _body_mesh(model, body_id)
+        if not len(vertices):
+            continue
+        path = f"{entity}/{name}"
+        rec.log(path, rr.Mesh3D(vertex_positions=vertices, triangle_indices=faces, albedo_factor=[*color, 255]), static=True)
+        quat_xyzw = reference.body_quat_w[:, b][:, [1, 2, 3, 0]]
+        rec.send_columns(path, indexes=times,
+                         columns=rr.Transform3D.columns(translation=reference.body_pos_w[:, b], quaternion=quat_xyzw))
+
+
+def _body_mesh(model: mujoco.MjModel, body_id: int) -> tuple[np.ndarray, np.ndarray]:
+    vertices, faces, count = [], [], 0
+    for geom in range(model.ngeom):
+        if model.geom_bodyid[geom] != body_id or model.geom_type[geom] != mujoco.mjtGeom.mjGEOM_MESH:
+            continue
+        mesh = model.geom_dataid[geom]
+        v = model.mesh_vert[model.mesh_vertadr[mesh]: model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]]
+        f = model.mesh_face[model.mesh_faceadr[mesh]: model.mesh_faceadr[mesh] + model.mesh_facenum[mesh]]
+        rotation = np.empty(9)
+        mujoco.mju_quat2Mat(rotation, model.geom_quat[geom])
+        vertices.append(v @ rotation.reshape(3, 3).T + model.geom_pos[geom])
+        faces.append(f + count)
+        count += len(v)
+    if not vertices:
+        return np.empty((0, 3)), np.empty((0, 3), dtype=np.int64)
+    return np.concatenate(vertices), np.concatenate(faces)
+
+
+def log_points(rec: rr.RecordingStream, entity: str, positions: np.ndarray, fps: float,
+               color: tuple[int, int, int], radius: float) -> None:
+    """Points over time, e.g. the retargeting's keypoint targets."""
+    n_frames, n_points = positions.shape[:2]
+    rec.send_columns(entity, indexes=_times(n_frames, fps),
+                     columns=rr.Points3D.columns(positions=positions.reshape(-1, 3)).partition([n_points] * n_frames))
+    rec.log(entity, rr.Points3D.from_fields(colors=[color], radii=[radius]), static=True)
 
 
 def open_recording(name: str, out: Path | None) -> rr.RecordingStream:

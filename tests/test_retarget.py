@@ -1,0 +1,128 @@
+"""Retargeting real LAFAN1 clips: the constraints hold, the feet behave, bad input says what is wrong."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from conftest import LAFAN_DIR, cli
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.evaluation.retarget_quality import retarget_quality
+from rd_pipeline.motion.bvh import read_bvh
+from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
+from rd_pipeline.retarget.retarget import RetargetResult, retarget
+from rd_pipeline.retarget.targets import _runs
+from rd_pipeline.robots import load_robot
+from stages.retarget import RetargetParams
+
+SPEC_QUALITY_KEYS = {
+    "fps_frames_per_s", "penetration_max_mm", "penetration_p95_mm", "skate_stance_mean_mm_s",
+    "joint_limit_violations", "velocity_limit_violations", "self_collision_frames", "jerk_mean",
+    "keypoint_error_mean_mm",
+}
+
+
+def _human(motion: str, seconds: float | None = None) -> HumanMotion:
+    human = human_motion_from_bvh(read_bvh(LAFAN_DIR / f"{motion}.bvh"), LAFAN_CM_TO_M, LAFAN_TO_Z_UP)
+    if seconds is None:
+        return human
+    n = int(seconds * human.fps)
+    return dataclasses.replace(human, pos_w=human.pos_w[:n], quat_w=human.quat_w[:n])
+
+
+def _retarget(robot: str, human: HumanMotion) -> RetargetResult:
+    p = RetargetParams()
+    return retarget(human, load_robot(robot), p.fps, p.contact, p.shape, p.weights, p.ik)
+
+
+@pytest.fixture(scope="module")
+def g1_dance() -> RetargetResult:
+    return _retarget("g1", _human("dance1_subject2", seconds=25.0))
+
+
+def test_constraints_hold_on_a_real_clip(g1_dance: RetargetResult) -> None:
+    robot = load_robot("g1")
+    q = retarget_quality(robot, g1_dance.reference, keypoint_targets=g1_dance.targets.positions,
+                         keypoint_bodies=g1_dance.targets.bodies)
+    assert g1_dance.reference.fps == 50.0 and g1_dance.reference.n_frames == 1250
+    assert q["penetration_max_mm"] <= 5.0
+    assert q["joint_limit_violations"] == 0
+    assert q["velocity_limit_violations"] == 0
+    assert q["self_collision_frames"] == 0
+    assert q["skate_stance_mean_mm_s"] <= 20.0
+    assert q["keypoint_error_mean_mm"] < 100.0
+
+
+def test_planted_feet_stay_put_and_flat(g1_dance: RetargetResult) -> None:
+    reference = g1_dance.reference
+    robot = load_robot("g1")
+    assert 0.3 < reference.foot_contact.mean() < 0.95
+    for side, foot in enumerate(robot.config.foot_bodies):
+        b = reference.body_names.index(foot)
+        for start, end in _runs(reference.foot_contact[:, side]):
+            if end - start < 10:
+                continue
+            # Away from the ends of a plant (where the smoothing eases in), the foot does not move.
+            inner = slice(start + 3, end - 3)
+            drift = np.ptp(reference.body_pos_w[inner, b, :2], axis=0).max()
+            assert drift < 0.01, f"{foot} slid {drift * 1000:.1f} mm during frames {start}-{end}"
+            up = Rotation.from_quat(reference.body_quat_w[inner, b][:, [1, 2, 3, 0]]).apply([0, 0, 1])
+            assert np.degrees(np.arccos(np.clip(up[:, 2], -1, 1))).max() < 5.0
+
+
+def test_scale_comes_from_the_models() -> None:
+    human = _human("dance1_subject1", seconds=4.0)
+    scales = {name: _retarget(name, human).targets.human_scale for name in ("g1", "h1_2")}
+    # Leg-length ratios: the G1 is a child-sized robot, the H1-2 close to an adult.
+    assert 0.6 < scales["g1"] < 0.8 < scales["h1_2"] < 1.05
+
+
+def test_h1_2_wrists_and_limits() -> None:
+    result = _retarget("h1_2", _human("dance1_subject3", seconds=8.0))
+    robot = load_robot("h1_2")
+    q = retarget_quality(robot, result.reference)
+    assert q["joint_limit_violations"] == 0 and q["velocity_limit_violations"] == 0
+    assert q["penetration_max_mm"] <= 5.0
+    assert result.reference.joint_pos.shape == (400, 27)
+
+
+def test_nan_frames_are_rejected() -> None:
+    human = _human("dance1_subject2", seconds=2.0)
+    pos = human.pos_w.copy()
+    pos[17, 3, 1] = np.nan
+    with pytest.raises(PipelineError, match=r"^human motion has a non-finite position at frame 17$"):
+        _retarget("g1", dataclasses.replace(human, pos_w=pos))
+
+
+def test_clip_shorter_than_a_frame_period() -> None:
+    human = _human("dance1_subject2", seconds=2.0)
+    one = dataclasses.replace(human, fps=100.0, pos_w=human.pos_w[:1], quat_w=human.quat_w[:1])
+    with pytest.raises(PipelineError, match=r"shorter than one frame period"):
+        _retarget("g1", one)
+
+
+def test_retarget_map_with_an_unknown_human_joint() -> None:
+    robot = load_robot("g1")
+    config = dataclasses.replace(robot.config, retarget_map={**robot.config.retarget_map, "left_elbow_link": "LeftElbow"})
+    broken = dataclasses.replace(robot, config=config)
+    p = RetargetParams()
+    with pytest.raises(PipelineError, match=r"bodies.retarget names human joint 'LeftElbow', not in the skeleton"):
+        retarget(_human("dance1_subject2", seconds=1.0), broken, p.fps, p.contact, p.shape, p.weights, p.ik)
+
+
+def test_stage_writes_reference_and_quality(artifacts: Path) -> None:
+    result = cli("run", "--robot", "g1", "--motion", "dance1_subject3", "--until", "retarget")
+    assert result.returncode == 0, result.stderr
+    (folder,) = (artifacts / "retarget" / "g1" / "dance1_subject3").iterdir()
+    quality = json.loads((folder / "quality.json").read_text())
+    assert SPEC_QUALITY_KEYS <= set(quality)
+    assert quality["joint_limit_violations"] == 0 and quality["penetration_max_mm"] <= 5.0
+    manifest = json.loads((folder / "manifest.json").read_text())
+    assert manifest["upstream"] == {"parse": json.loads(
+        next((artifacts / "parse" / "dance1_subject3").iterdir()).joinpath("manifest.json").read_text())["key"]}
+    assert manifest["metrics"]["skate_stance_mean_mm_s"] == quality["skate_stance_mean_mm_s"]
