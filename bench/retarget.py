@@ -18,6 +18,8 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import numpy as np  # noqa: E402
+
 from rd_pipeline import paths  # noqa: E402
 from rd_pipeline.evaluation.retarget_quality import retarget_quality  # noqa: E402
 from rd_pipeline.motion.bvh import read_bvh  # noqa: E402
@@ -60,9 +62,11 @@ def main() -> None:
                 paths.csv_path(name, motion), robot, import_params.source_fps, import_params.fps,
                 import_params.interpolation, import_params.contact,
             ).reference
-            # The dataset is scored against our scaled-human targets too: same clip, same frames.
+            # The dataset is scored against our scaled-human targets too, after the heading and
+            # offset that best align its (arbitrary) world frame with ours.
             theirs = retarget_quality(
-                robot, dataset, keypoint_targets=result.targets.positions, keypoint_bodies=result.targets.bodies,
+                robot, dataset, keypoint_targets=_aligned_targets(dataset, result.targets),
+                keypoint_bodies=result.targets.bodies,
             )
             rows.append({"robot": name, "motion": motion, "seconds": round(seconds, 2), "ours": ours, "dataset": theirs})
             print(json.dumps(rows[-1]), flush=True)
@@ -70,6 +74,23 @@ def main() -> None:
     args.out.with_suffix(".json").write_text(json.dumps(rows, indent=2) + "\n")
     args.out.with_suffix(".md").write_text(_table(rows))
     print(_table(rows))
+
+
+def _aligned_targets(reference, targets) -> np.ndarray:
+    """Our targets moved by the yaw + translation that best fits the reference's key bodies (2-D Procrustes)."""
+    index = [reference.body_names.index(b) for b in targets.bodies]
+    theirs = reference.body_pos_w[:, index].reshape(-1, 3)
+    ours = targets.positions.reshape(-1, 3)
+    a, b = ours[:, :2] - ours[:, :2].mean(0), theirs[:, :2] - theirs[:, :2].mean(0)
+    u, _, vt = np.linalg.svd(a.T @ b)
+    rotation = (u @ vt).T
+    if np.linalg.det(rotation) < 0:
+        u[:, -1] *= -1
+        rotation = (u @ vt).T
+    moved = targets.positions.copy()
+    moved[..., :2] = (targets.positions[..., :2] - ours[:, :2].mean(0)) @ rotation.T + theirs[:, :2].mean(0)
+    moved[..., 2] += theirs[:, 2].mean() - ours[:, 2].mean()
+    return moved
 
 
 def _table(rows: list[dict]) -> str:

@@ -49,7 +49,7 @@ class IkSettings:
     """Fraction of each joint's velocity limit a frame step may use."""
     collision_margin_m: float = 0.02
     """Minimum distance kept between configured collision pairs."""
-    collision_detection_m: float = 0.05
+    collision_detection_m: float = 0.15
     """Distance under which a collision pair enters the QP."""
     root_speed_m_s: float = 4.0
     """Bound on the pelvis speed per axis (m/s), applied per frame."""

@@ -101,7 +101,7 @@ class TargetShaping:
 
     smoothing_s: float = 0.12
     """Gaussian sigma (s) on the human joint paths; mocap jitter would otherwise become joint jerk."""
-    swing_clearance_m: float = 0.03
+    swing_clearance_m: float = 0.04
     """Height the lowest point of a swinging foot clears the floor by, once lifted."""
     swing_lift_time_s: float = 0.1
     """Time a swing foot takes to rise to its clearance before it travels (and to come down after)."""
