@@ -1,9 +1,9 @@
 """The DAG stages, one thin module each. `REGISTRY` lists the stages that exist, in pipeline order."""
 
 from rd_pipeline.artifacts.stage import Stage
-from stages import import_motion, parse, retarget
+from stages import import_motion, parse, prior, retarget, stats
 
-REGISTRY: tuple[Stage, ...] = (parse.STAGE, retarget.STAGE, import_motion.STAGE)
+REGISTRY: tuple[Stage, ...] = (parse.STAGE, retarget.STAGE, import_motion.STAGE, stats.STAGE, prior.STAGE)
 
 
 def stage_names() -> list[str]:

@@ -15,8 +15,7 @@ from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.reference import REFERENCE_FILE
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.robots import load_robot
-from rd_pipeline.robots.assets import asset_path
-from rd_pipeline.robots.config import config_path, load_robot_config
+from rd_pipeline.robots.model import model_files
 
 
 @dataclass(frozen=True)
@@ -38,8 +37,7 @@ def _inputs(robot: str | None, motion: str) -> dict[str, Path]:
     csv = paths.csv_path(robot, motion)
     if csv is None:
         raise PipelineError(f"import of {robot}/{motion}: RD_RETARGETED_DIR is not set")
-    config = load_robot_config(robot)
-    return {"csv": csv, "robot_config": config_path(robot), "mjcf": asset_path(config.mjcf)}
+    return {"csv": csv, **model_files(robot)}
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 from rd_pipeline.artifacts.stage import Stage, StageContext
@@ -17,8 +16,7 @@ from rd_pipeline.retarget.ik import IkSettings, IkWeights
 from rd_pipeline.retarget.retarget import retarget
 from rd_pipeline.retarget.targets import TARGETS_FILE, TargetShaping
 from rd_pipeline.robots import load_robot
-from rd_pipeline.robots.assets import asset_path
-from rd_pipeline.robots.config import config_path, load_robot_config
+from rd_pipeline.robots.model import model_files
 
 
 @dataclass(frozen=True)
@@ -35,12 +33,6 @@ class RetargetParams:
     """IK task costs."""
     ik: IkSettings = IkSettings()
     """IK iterations, limits and the sequence-level smoothing."""
-
-
-def _inputs(robot: str | None, motion: str) -> dict[str, Path]:
-    assert robot is not None
-    config = load_robot_config(robot)
-    return {"robot_config": config_path(robot), "mjcf": asset_path(config.mjcf)}
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
@@ -76,6 +68,6 @@ STAGE = Stage(
     params=RetargetParams,
     provides="reference",
     run=_run,
-    inputs=_inputs,
+    inputs=lambda robot, motion: model_files(robot),
     requires=("human_motion",),
 )

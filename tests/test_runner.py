@@ -17,7 +17,7 @@ from rd_pipeline.artifacts.keys import artifact_key
 from rd_pipeline.artifacts.runner import Pipeline, execute, resolve_source
 from rd_pipeline.artifacts.store import ArtifactStore
 from rd_pipeline.errors import PipelineError
-from stages import REGISTRY
+from stages import REGISTRY, stage_names
 
 
 def _pipeline(robot: str, motion: str, values: dict | None = None, source: str | None = None) -> Pipeline:
@@ -38,8 +38,11 @@ def test_source_choice(monkeypatch: pytest.MonkeyPatch) -> None:
     assert resolve_source("g1", "dance1_subject2", None) == "bvh"
     assert resolve_source("h1_2", "dance2_subject4", None) == "csv"
     assert resolve_source("g1", "dance1_subject2", "csv") == "csv"
-    assert [s.name for s in _pipeline("g1", "dance1_subject2").chain()] == ["parse", "retarget"]
-    assert [s.name for s in _pipeline("h1_2", "dance2_subject4").chain()] == ["import"]
+    # Each source has its own head stages; everything downstream is shared.
+    assert [s.name for s in _pipeline("g1", "dance1_subject2").chain()] == [n for n in stage_names() if n != "import"]
+    assert [s.name for s in _pipeline("h1_2", "dance2_subject4").chain()] == [
+        n for n in stage_names() if n not in ("parse", "retarget")
+    ]
     with pytest.raises(PipelineError, match=r"no data for motion 'dance9_subject1'"):
         resolve_source("g1", "dance9_subject1", None)
 
@@ -67,20 +70,21 @@ def test_cache_hit_does_no_work_and_force_redoes_it(artifacts: Path) -> None:
 
 def test_params_change_the_key_and_the_old_artifact_turns_stale(artifacts: Path) -> None:
     store = ArtifactStore(artifacts)
-    (old,) = execute(_pipeline("h1", "dance2_subject1"), store)
+    (old,) = execute(_pipeline("h1", "dance2_subject1"), store, until="import")
     changed = _pipeline("h1", "dance2_subject1", {"import": {"interpolation": "linear"}})
     from rd_pipeline.artifacts.runner import stage_status
 
-    (row,) = stage_status(changed, store)
-    assert row["state"] == "stale" and row["other_keys"] == [old.key]
-    (new,) = execute(changed, store)
+    row = stage_status(changed, store)[0]
+    assert row["stage"] == "import" and row["state"] == "stale" and row["other_keys"] == [old.key]
+    (new,) = execute(changed, store, until="import")
     assert new.key != old.key and not new.cached
 
 
 def test_selection_errors() -> None:
     pipeline = _pipeline("h1_2", "dance2_subject4")
-    with pytest.raises(PipelineError, match=r"^--until: unknown stage 'train' \(stages: parse, retarget, import\)$"):
-        pipeline.select(None, "train", None)
+    known = ", ".join(stage_names())
+    with pytest.raises(PipelineError, match=rf"^--until: unknown stage 'no_such_stage' \(stages: {known}\)$"):
+        pipeline.select(None, "no_such_stage", None)
     with pytest.raises(PipelineError, match=r"^--only: stage 'parse' is not in the csv pipeline for h1_2/dance2_subject4"):
         pipeline.select(None, None, "parse")
 
@@ -110,7 +114,10 @@ def test_cli_cache_hit_and_status_json(artifacts: Path) -> None:
     assert second.returncode == 0 and "cached parse" in second.stderr and "no work" in second.stderr
     assert cli("stage", "import", "--robot", "h1_2", "--motion", "dance2_subject4").returncode == 0
     status = json.loads(cli("status", "--json").stdout)
-    states = {(p["robot"], p["motion"], s["stage"]): s["state"] for p in status["pipelines"] for s in p["stages"]}
+    states = {
+        (p["robot"], p["motion"], s["stage"]): s["state"]
+        for p in status["pipelines"] for s in p["stages"] if s["state"] != "missing"
+    }
     # parse is robot-independent: its artifact belongs to no robot.
     assert states == {(None, "dance1_subject2", "parse"): "cached", ("h1_2", "dance2_subject4", "import"): "cached"}
 

@@ -6,6 +6,7 @@ import difflib
 import re
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -115,3 +116,22 @@ def collision_geoms(model: mujoco.MjModel, body_id: int) -> list[int]:
     geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == body_id]
     colliding = [g for g in geoms if model.geom_contype[g] or model.geom_conaffinity[g]]
     return colliding or geoms
+
+
+def leg_joints(robot: Robot) -> list[str]:
+    """Config joints on the chains from the root body to the feet, in config order."""
+    model = robot.model
+    on_chain: set[str] = set()
+    for foot in robot.config.foot_bodies:
+        body = robot.body_ids[foot]
+        while body > 0:
+            for joint in range(model.body_jntadr[body], model.body_jntadr[body] + model.body_jntnum[body]):
+                on_chain.add(model.joint(joint).name)
+            body = model.body_parentid[body]
+    return [j for j in robot.config.joint_names if j in on_chain]
+
+
+def model_files(name: str) -> dict[str, Path]:
+    """The files that define a robot (its config and MJCF), as hashed inputs of the stages that use it."""
+    config = load_robot_config(name)
+    return {"robot_config": config.source, "mjcf": asset_path(config.mjcf)}
