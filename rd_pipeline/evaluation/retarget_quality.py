@@ -126,6 +126,11 @@ def retarget_quality(
 
 def self_collision_frames(robot: Robot, reference: ReferenceMotion, depth_m: float) -> int:
     """Frames where any `collision_pairs` body pair has signed distance below -depth_m (MuJoCo geometry)."""
+    return int(colliding_frames(robot, _qpos_trajectory(robot, reference), depth_m).sum())
+
+
+def colliding_frames(robot: Robot, qpos: np.ndarray, depth_m: float) -> np.ndarray:
+    """(T,) bool: some configured body pair is closer than -depth_m (a negative depth asks for clearance)."""
     model = robot.model
     geom_pairs = np.array(
         [
@@ -136,15 +141,15 @@ def self_collision_frames(robot: Robot, reference: ReferenceMotion, depth_m: flo
         ],
         dtype=np.int64,
     ).reshape(-1, 2)
+    colliding = np.zeros(len(qpos), dtype=bool)
     if len(geom_pairs) == 0:
-        return 0
+        return colliding
     geoms, columns = np.unique(geom_pairs, return_inverse=True)
     columns = columns.reshape(-1, 2)
-    qpos = _qpos_trajectory(robot, reference)
     data = mujoco.MjData(model)
 
-    # First pass: geom centres only. Two geoms can penetrate only where their bounding spheres overlap,
-    # and on a dance clip most pairs are apart most of the time, so few frames need the exact distance.
+    # First pass: geom centres only. Two geoms can come this close only where their bounding spheres
+    # (grown by the clearance asked for) overlap; on a dance clip few frames need the exact distance.
     centres = np.empty((len(qpos), len(geoms), 3))
     for t in range(len(qpos)):
         data.qpos[:] = qpos[t]
@@ -152,17 +157,17 @@ def self_collision_frames(robot: Robot, reference: ReferenceMotion, depth_m: flo
         centres[t] = data.geom_xpos[geoms]
     # rbound 0 means unbounded (planes, height fields): never prune those.
     radius = np.where(model.geom_rbound[geoms] > 0, model.geom_rbound[geoms], np.inf)
+    margin = max(0.0, -depth_m)
     gap = np.linalg.norm(centres[:, columns[:, 0]] - centres[:, columns[:, 1]], axis=-1)
-    candidate = gap < radius[columns[:, 0]] + radius[columns[:, 1]]
+    candidate = gap < radius[columns[:, 0]] + radius[columns[:, 1]] + margin
 
-    colliding = 0
     for t in np.flatnonzero(candidate.any(axis=1)):
         data.qpos[:] = qpos[t]
         mujoco.mj_kinematics(model, data)
         for g1, g2 in geom_pairs[candidate[t]]:
-            # distmax 0: separated pairs stop early; only the depth of penetrating ones matters.
-            if mujoco.mj_geomDistance(model, data, int(g1), int(g2), 0.0, None) < -depth_m:
-                colliding += 1
+            # distmax = the clearance asked for: pairs farther apart stop early.
+            if mujoco.mj_geomDistance(model, data, int(g1), int(g2), margin, None) < -depth_m:
+                colliding[t] = True
                 break
     return colliding
 

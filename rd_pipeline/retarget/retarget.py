@@ -9,7 +9,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.evaluation.retarget_quality import FootMeshes
+from rd_pipeline.evaluation.retarget_quality import FootMeshes, colliding_frames
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
@@ -51,7 +51,13 @@ def retarget(
     ik = RetargetIk(robot, targets, weights, settings)
     qpos = ik.solve(track(range(targets.n_frames), targets.n_frames))
     if settings.trajectory_smoothing_s > 0:
-        qpos = _smooth_trajectory(robot, qpos, settings.trajectory_smoothing_s * fps)
+        smoothed = _smooth_trajectory(robot, qpos, settings.trajectory_smoothing_s * fps)
+        # Smoothing knows nothing of self-collision: where it brings a pair closer than the margin
+        # the IK kept, ease back to the IK solution for those frames.
+        close = colliding_frames(robot, smoothed, -0.5 * settings.collision_margin_m)
+        keep_ik = np.minimum(smooth_cover(close.astype(float), fps, 0.05), 1.0)[:, None]
+        qpos = keep_ik * qpos + (1.0 - keep_ik) * smoothed
+        qpos[:, 3:7] /= np.linalg.norm(qpos[:, 3:7], axis=1, keepdims=True)
         qpos = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames))
     reference = _reference(robot, qpos, targets)
     lowest = feet.lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names).min(axis=1)
