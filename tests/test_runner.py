@@ -150,6 +150,9 @@ def test_interrupt_removes_the_partial_artifact(artifacts: Path) -> None:
     process = subprocess.Popen(
         [sys.executable, "-m", "rd_pipeline", "stage", "import", "--robot", "h1", "--motion", "dance2_subject2"],
         cwd=PROJECT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=os.environ.copy(),
+        # A shell that started us in the background ignores SIGINT, and children inherit that; a user's
+        # terminal does not, so give the child the default disposition (Python then raises KeyboardInterrupt).
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     deadline = time.time() + 60
     while not list(folder.glob(".tmp-*")) and time.time() < deadline:
