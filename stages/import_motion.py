@@ -10,12 +10,8 @@ from typing import Any
 from rd_pipeline import paths
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.evaluation.retarget_quality import QUALITY_FILE, retarget_quality
 from rd_pipeline.motion.contact import ContactThresholds
-from rd_pipeline.motion.reference import REFERENCE_FILE
-from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.robots import load_robot
-from rd_pipeline.robots.model import model_files
+from rd_pipeline.robots.assets import model_files
 
 
 @dataclass(frozen=True)
@@ -41,6 +37,11 @@ def _inputs(robot: str | None, motion: str) -> dict[str, Path]:
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
+    from rd_pipeline.evaluation.retarget_quality import QUALITY_FILE, retarget_quality
+    from rd_pipeline.motion.reference import REFERENCE_FILE
+    from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+    from rd_pipeline.robots import load_robot
+
     p = ctx.params
     robot = load_robot(ctx.robot)
     result = import_retargeted_csv(ctx.inputs["csv"], robot, p.source_fps, p.fps, p.interpolation, p.contact)

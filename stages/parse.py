@@ -8,8 +8,7 @@ from typing import Any
 
 from rd_pipeline import paths
 from rd_pipeline.artifacts.stage import Stage, StageContext
-from rd_pipeline.motion.bvh import read_bvh
-from rd_pipeline.motion.human import HUMAN_MOTION_FILE, LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
+from rd_pipeline.motion.lafan import LAFAN_CM_TO_M
 
 
 @dataclass(frozen=True)
@@ -25,6 +24,9 @@ def _inputs(robot: str | None, motion: str) -> dict[str, Path]:
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
+    from rd_pipeline.motion.bvh import read_bvh
+    from rd_pipeline.motion.human import HUMAN_MOTION_FILE, LAFAN_TO_Z_UP, human_motion_from_bvh
+
     clip = read_bvh(ctx.inputs["bvh"])
     human = human_motion_from_bvh(clip, ctx.params.length_unit_m, LAFAN_TO_Z_UP)
     human.save(ctx.out_dir / HUMAN_MOTION_FILE)

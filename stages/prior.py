@@ -5,12 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from rd_pipeline.artifacts.stage import Stage, StageContext
-from rd_pipeline.sampling.plots import plot_balancing
-from rd_pipeline.sampling.prior import PRIOR_FILE, flatness, solve_balanced_prior
-from rd_pipeline.sampling.segments import SEGMENTS_FILE, SegmentStats
 
 PLOT_FILE = "balancing.png"
 
@@ -24,6 +19,12 @@ class PriorParams:
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
+    import numpy as np
+
+    from rd_pipeline.sampling.plots import plot_balancing
+    from rd_pipeline.sampling.prior import PRIOR_FILE, flatness, solve_balanced_prior
+    from rd_pipeline.sampling.segments import SEGMENTS_FILE, SegmentStats
+
     stats = SegmentStats.load(ctx.upstream["segment_stats"].path / SEGMENTS_FILE)
     prior = solve_balanced_prior(stats.histograms, stats.lengths, ctx.params.solver)
     np.savez(ctx.out_dir / PRIOR_FILE, weights=prior.weights, time_weights=prior.time_weights,

@@ -8,15 +8,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from rd_pipeline.artifacts.stage import Stage, StageContext
-from rd_pipeline.evaluation.retarget_quality import QUALITY_FILE, retarget_quality
 from rd_pipeline.motion.contact import ContactThresholds
-from rd_pipeline.motion.human import HUMAN_MOTION_FILE, HumanMotion
-from rd_pipeline.motion.reference import REFERENCE_FILE
-from rd_pipeline.retarget.ik import IkSettings, IkWeights
-from rd_pipeline.retarget.retarget import retarget
-from rd_pipeline.retarget.targets import TARGETS_FILE, TargetShaping
-from rd_pipeline.robots import load_robot
-from rd_pipeline.robots.model import model_files
+from rd_pipeline.retarget.settings import IkSettings, IkWeights, TargetShaping
+from rd_pipeline.robots.assets import model_files
 
 
 @dataclass(frozen=True)
@@ -36,6 +30,13 @@ class RetargetParams:
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
+    from rd_pipeline.evaluation.retarget_quality import QUALITY_FILE, retarget_quality
+    from rd_pipeline.motion.human import HUMAN_MOTION_FILE, HumanMotion
+    from rd_pipeline.motion.reference import REFERENCE_FILE
+    from rd_pipeline.retarget.retarget import retarget
+    from rd_pipeline.retarget.targets import TARGETS_FILE
+    from rd_pipeline.robots import load_robot
+
     p: RetargetParams = ctx.params
     robot = load_robot(ctx.robot)
     human = HumanMotion.load(ctx.upstream["human_motion"].path / HUMAN_MOTION_FILE)

@@ -7,11 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from rd_pipeline.artifacts.stage import Stage, StageContext
-from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
-from rd_pipeline.robots import load_robot
-from rd_pipeline.robots.model import leg_joints, model_files
-from rd_pipeline.sampling.plots import plot_segment_statistics
-from rd_pipeline.sampling.segments import SEGMENTS_FILE, segment_statistics, std_ranking
+from rd_pipeline.robots.assets import model_files
 
 PLOT_FILE = "lower_body_segments.png"
 SUMMARY_FILE = "stats.json"
@@ -30,6 +26,12 @@ class StatsParams:
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
+    from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+    from rd_pipeline.robots import load_robot
+    from rd_pipeline.robots.model import leg_joints
+    from rd_pipeline.sampling.plots import plot_segment_statistics
+    from rd_pipeline.sampling.segments import SEGMENTS_FILE, segment_statistics, std_ranking
+
     p: StatsParams = ctx.params
     robot = load_robot(ctx.robot)
     config = robot.config

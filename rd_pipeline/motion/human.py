@@ -9,10 +9,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from rd_pipeline.motion.bvh import BvhClip, forward_kinematics
+from rd_pipeline.motion.lafan import LAFAN_CM_TO_M, LAFAN_TO_Z_UP  # noqa: F401 (re-exported)
 
-# LAFAN1 is Y-up in centimetres. A +90 degree turn about X maps Y-up to Z-up, keeping handedness.
-LAFAN_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-LAFAN_CM_TO_M = 0.01
 HUMAN_MOTION_FILE = "human_motion.npz"
 """File name of a human motion inside an artifact."""
 

@@ -17,6 +17,7 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.contact import ContactThresholds, label_contacts
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.smoothing import smooth_cover
+from rd_pipeline.retarget.settings import TargetShaping
 from rd_pipeline.retarget.frames import frame_from_axes, yaw_and_pitch, yaw_pitch_frame
 from rd_pipeline.robots import Robot
 
@@ -93,20 +94,6 @@ def robot_rest_rotation(robot: Robot, body: str) -> np.ndarray:
     data.qpos[3] = 1.0
     mujoco.mj_kinematics(robot.model, data)
     return data.xmat[robot.body_ids[body]].reshape(3, 3).copy()
-
-
-@dataclass(frozen=True)
-class TargetShaping:
-    """How the human motion is shaped into robot targets."""
-
-    smoothing_s: float = 0.12
-    """Gaussian sigma (s) on the human joint paths; mocap jitter would otherwise become joint jerk."""
-    swing_clearance_m: float = 0.04
-    """Height the lowest point of a swinging foot clears the floor by, once lifted."""
-    swing_lift_time_s: float = 0.1
-    """Time a swing foot takes to rise to its clearance before it travels (and to come down after)."""
-    reach_fraction: float = 0.97
-    """Fraction of the straight-leg length a planted leg may use; beyond it the body is lowered."""
 
 
 def build_targets(

@@ -31,3 +31,11 @@ def asset_path(relative: str) -> Path:
     if not path.is_file():
         raise PipelineError(f"{path}: robot model file not found (check RD_ROBOT_ASSETS)")
     return path
+
+
+def model_files(name: str) -> dict[str, Path]:
+    """The files that define a robot (its config and MJCF), as hashed inputs of the stages that use it."""
+    from rd_pipeline.robots.config import load_robot_config
+
+    config = load_robot_config(name)
+    return {"robot_config": config.source, "mjcf": asset_path(config.mjcf)}

@@ -6,7 +6,6 @@ import difflib
 import re
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -130,8 +129,3 @@ def leg_joints(robot: Robot) -> list[str]:
             body = model.body_parentid[body]
     return [j for j in robot.config.joint_names if j in on_chain]
 
-
-def model_files(name: str) -> dict[str, Path]:
-    """The files that define a robot (its config and MJCF), as hashed inputs of the stages that use it."""
-    config = load_robot_config(name)
-    return {"robot_config": config.source, "mjcf": asset_path(config.mjcf)}
