@@ -1,0 +1,139 @@
+"""Residual actions, PD torques, reward terms on hand-built states, and the multi-head GAE."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from rd_pipeline.rl.actions import ActionConfig, ResidualActions, pd_torque
+from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
+from rd_pipeline.rl.rewards import GROUPS, RewardIndices, RewardLimits, TrackingState, compute_rewards
+from rd_pipeline.robots import load_robot
+
+N, B, P = 3, 5, 4
+
+
+def _state(**changes) -> TrackingState:
+    """Robot exactly on the reference, standing still, no torques: every penalty is zero."""
+    zeros = lambda *shape: torch.zeros(*shape, dtype=torch.float64)  # noqa: E731
+    quat = zeros(N, B, 4)
+    quat[..., 0] = 1.0
+    body = torch.arange(N * B * 3, dtype=torch.float64).reshape(N, B, 3) / 10
+    joints = torch.linspace(-0.5, 0.5, P, dtype=torch.float64).repeat(N, 1)
+    values = dict(
+        body_pos=body.clone(), body_quat=quat.clone(), body_lin_vel=zeros(N, B, 3), body_ang_vel=zeros(N, B, 3),
+        joint_pos=joints.clone(), joint_vel=zeros(N, P), ref_body_pos=body.clone(), ref_body_quat=quat.clone(),
+        ref_body_lin_vel=zeros(N, B, 3), ref_body_ang_vel=zeros(N, B, 3), ref_joint_pos=joints.clone(),
+        ref_joint_vel=zeros(N, P), feet_contact=torch.ones(N, 2, dtype=torch.bool),
+        ref_feet_contact=torch.ones(N, 2, dtype=torch.bool), feet_force=zeros(N, 2, 3), feet_speed=zeros(N, 2),
+        torque=zeros(N, P), joint_acc=zeros(N, P), action=zeros(N, P), last_action=zeros(N, P),
+        second_last_action=zeros(N, P), undesired_contacts=zeros(N), terminated=torch.zeros(N, dtype=torch.bool),
+    )
+    values.update(changes)
+    return TrackingState(**values)
+
+
+INDICES = RewardIndices(root=0, feet=(3, 4), keypoints=(1, 2))
+LIMITS = RewardLimits(
+    joint_lower=torch.full((P,), -1.0, dtype=torch.float64), joint_upper=torch.full((P,), 1.0, dtype=torch.float64),
+    joint_velocity=torch.full((P,), 10.0, dtype=torch.float64), torque=torch.full((P,), 50.0, dtype=torch.float64),
+)
+
+
+def test_perfect_tracking_earns_every_tracking_weight() -> None:
+    groups, terms = compute_rewards(_state(), INDICES, LIMITS, penalty_scale=0.8)
+    assert GROUPS == ("body", "root", "joint", "contact", "regularization")
+    expected = {"body": 2.0 + 0.5 + 1.8 + 0.5 + 2.0 + 0.5 + 0.5 + 0.5 + 0.5, "root": 2.25, "joint": 1.5,
+                "contact": 0.5, "regularization": 0.0}
+    for g, name in enumerate(GROUPS):
+        assert torch.allclose(groups[:, g], torch.full((N,), expected[name], dtype=torch.float64))
+    assert set(terms) >= {"body_pos", "termination", "slippage"}
+
+
+def test_hand_computed_terms() -> None:
+    body = _state().body_pos.clone()
+    body[:, :, 0] += 0.02  # every body 2 cm off: e = 0.0004 = sigma^2 for body_pos
+    joints = _state().joint_pos.clone()
+    joints[:, 1] += 0.3  # one joint 0.3 rad off: e = 0.09 = sigma^2
+    torque = torch.full((N, P), 10.0, dtype=torch.float64)
+    force = torch.zeros(N, 2, 3, dtype=torch.float64)
+    force[:, 0, 2] = 500.0  # 100 N above the 400 N allowance
+    terminated = torch.tensor([True, False, False])
+    quat = _state().body_quat.clone()
+    half = math.radians(10) / 2
+    quat[:, 0] = torch.tensor([math.cos(half), 0.0, 0.0, math.sin(half)], dtype=torch.float64)  # pelvis yawed 10 deg
+    state = _state(body_pos=body, joint_pos=joints, torque=torque, feet_force=force, terminated=terminated,
+                   body_quat=quat)
+    _, terms = compute_rewards(state, INDICES, LIMITS, penalty_scale=0.8)
+    assert torch.allclose(terms["body_pos"], torch.full((N,), 2.0 * math.exp(-1.0), dtype=torch.float64))
+    assert torch.allclose(terms["body_pos_rel"], torch.full((N,), 0.5, dtype=torch.float64))  # a shift is not a pose error
+    assert torch.allclose(terms["joint_pos"], torch.full((N,), 1.0 * math.exp(-1.0), dtype=torch.float64))
+    angle = math.radians(10)
+    assert terms["root_orientation"][0].item() == pytest.approx(0.25 * math.exp(-angle**2 / 0.25**2))
+    assert terms["body_orientation"][0].item() == pytest.approx(0.5 * math.exp(-(angle**2 / B) / 0.1**2))
+    assert torch.allclose(terms["torque"], torch.full((N,), -1e-6 * 0.8 * 4 * 100, dtype=torch.float64))
+    assert torch.allclose(terms["foot_contact_force"], torch.full((N,), -0.01 * 0.8 * 100, dtype=torch.float64))
+    assert terms["termination"].tolist() == pytest.approx([-200 * 0.8, 0.0, 0.0])
+
+
+def test_adaptive_sigma_widens_the_kernel() -> None:
+    body = _state().body_pos.clone()
+    body[:, :, 0] += 0.02
+    _, terms = compute_rewards(_state(body_pos=body), INDICES, LIMITS, 1.0, sigma_scale={"body_pos": 2.0})
+    assert terms["body_pos"][0].item() == pytest.approx(2.0 * math.exp(-0.25))
+
+
+def _single_head_gae(rewards, values, dones, last, gamma, lam):
+    advantage, out = torch.zeros_like(last), torch.zeros_like(rewards)
+    for t in reversed(range(rewards.shape[0])):
+        nxt = last if t == rewards.shape[0] - 1 else values[t + 1]
+        live = 1.0 - dones[t].float()
+        delta = rewards[t] + live * gamma * nxt - values[t]
+        advantage = delta + live * gamma * lam * advantage
+        out[t] = advantage
+    return out
+
+
+def test_multi_head_gae_is_per_head_gae() -> None:
+    g = torch.Generator().manual_seed(0)
+    T, E, G = 24, 16, 5
+    rewards, values = torch.randn(T, E, G, generator=g), torch.randn(T, E, G, generator=g)
+    dones, last = torch.rand(T, E, generator=g) < 0.1, torch.randn(E, G, generator=g)
+    advantages, returns = multi_head_gae(rewards, values, dones, last, 0.99, 0.95)
+    for head in range(G):
+        single = _single_head_gae(rewards[..., head], values[..., head], dones, last[:, head], 0.99, 0.95)
+        assert torch.allclose(advantages[..., head], single, atol=1e-6)
+    assert torch.allclose(returns, advantages + values)
+    combined = combined_advantage(advantages)
+    summed = advantages.sum(-1)
+    assert torch.allclose(combined, (summed - summed.mean()) / (summed.std() + 1e-8))
+
+
+def test_residual_mask_clip_and_limits() -> None:
+    robot = load_robot("g1")
+    config = robot.config
+    mask = torch.zeros(len(config.policy_joints), dtype=torch.bool)
+    mask[list(config.residual_indices)] = True
+    lower, upper = (torch.as_tensor(x) for x in robot.joint_range.T)
+    default = torch.tensor(config.default_pos)
+    reference = default.repeat(2, 1)
+    actions = torch.full((2, len(mask)), 0.4, dtype=torch.float64)
+    actions[1] = 1e6  # far beyond the clip
+    selective = ResidualActions(ActionConfig(), mask, default, lower, upper).targets(actions, reference)
+    assert torch.equal(selective[:, ~mask], reference[:, ~mask])  # masked-out joints follow the reference
+    assert torch.allclose(selective[0, mask], reference[0, mask] + 0.25 * 0.4)
+    assert torch.all(selective <= upper) and torch.all(selective >= lower)
+    everything = ResidualActions(ActionConfig(mode="all", clip=1.0), mask, default, lower, upper).targets(actions, reference)
+    assert torch.allclose(everything[1], torch.minimum(reference[1] + 0.25, upper))
+    absolute = ResidualActions(ActionConfig(mode="none"), mask, default, lower, upper).targets(actions, reference + 1.0)
+    assert torch.allclose(absolute[0], torch.clamp(default + 0.1, lower, upper))
+    with pytest.raises(ValueError, match="action mode must be one of"):
+        ResidualActions(ActionConfig(mode="half"), mask, default, lower, upper)
+
+
+def test_pd_torque_is_clipped() -> None:
+    kp, kd, limit = torch.tensor([100.0, 100.0]), torch.tensor([2.0, 2.0]), torch.tensor([25.0, 25.0])
+    tau = pd_torque(torch.tensor([0.1, 1.0]), torch.zeros(2), torch.tensor([1.0, 0.0]), kp, kd, limit)
+    assert tau.tolist() == pytest.approx([8.0, 25.0])
