@@ -1,9 +1,9 @@
 """The DAG stages, one thin module each. `REGISTRY` lists the stages that exist, in pipeline order."""
 
 from rd_pipeline.artifacts.stage import Stage
-from stages import import_motion, parse, prior, retarget, stats
+from stages import import_motion, parse, prior, retarget, stats, train
 
-REGISTRY: tuple[Stage, ...] = (parse.STAGE, retarget.STAGE, import_motion.STAGE, stats.STAGE, prior.STAGE)
+REGISTRY: tuple[Stage, ...] = (parse.STAGE, retarget.STAGE, import_motion.STAGE, stats.STAGE, prior.STAGE, train.STAGE)
 
 
 def stage_names() -> list[str]:

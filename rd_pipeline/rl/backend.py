@@ -1,0 +1,128 @@
+"""Physics backends behind one seam: the environment logic (torch) never touches MuJoCo directly.
+
+`MujocoCpuBackend` keeps one `MjData` per environment and steps chunks of environments in worker
+threads (MuJoCo releases the GIL inside `mj_step`), so every core is busy. A GPU backend (MuJoCo
+Warp) implements the same protocol.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Protocol
+
+import mujoco
+import numpy as np
+
+
+@dataclass
+class PhysicsState:
+    """What the environment reads after a control step (numpy, per environment)."""
+
+    qpos: np.ndarray
+    """(N, nq)"""
+    qvel: np.ndarray
+    """(N, nv)"""
+    body_pos: np.ndarray
+    """(N, nbody, 3) world positions."""
+    body_quat: np.ndarray
+    """(N, nbody, 4) world orientations, wxyz."""
+    body_vel: np.ndarray
+    """(N, nbody, 6) world-frame [angular, linear] velocities at the body origins."""
+    actuator_force: np.ndarray
+    """(N, nu) applied (clipped) PD torques of the last physics step."""
+    contact_force: np.ndarray
+    """(N, nbody, 3) summed contact force on each body (world frame)."""
+
+
+class PhysicsBackend(Protocol):
+    num_envs: int
+
+    def set_state(self, env_ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None: ...
+
+    def step(self, ctrl: np.ndarray, substeps: int, applied: np.ndarray | None = None) -> PhysicsState: ...
+
+
+class MujocoCpuBackend:
+    """N environments, each with its own `MjModel` (domain randomization) and `MjData`."""
+
+    def __init__(self, models: list[mujoco.MjModel], threads: int) -> None:
+        self.models = models
+        self.datas = [mujoco.MjData(m) for m in models]
+        self.num_envs = len(models)
+        self.threads = max(1, threads)
+        self.pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+        bounds = np.linspace(0, self.num_envs, self.threads + 1).astype(int)
+        self.chunks = [range(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+        model = models[0]
+        self.state = PhysicsState(
+            qpos=np.zeros((self.num_envs, model.nq)), qvel=np.zeros((self.num_envs, model.nv)),
+            body_pos=np.zeros((self.num_envs, model.nbody, 3)), body_quat=np.zeros((self.num_envs, model.nbody, 4)),
+            body_vel=np.zeros((self.num_envs, model.nbody, 6)), actuator_force=np.zeros((self.num_envs, model.nu)),
+            contact_force=np.zeros((self.num_envs, model.nbody, 3)),
+        )
+
+    def set_state(self, env_ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
+        for k, i in enumerate(env_ids):
+            data = self.datas[i]
+            mujoco.mj_resetData(self.models[i], data)
+            data.qpos[:], data.qvel[:] = qpos[k], qvel[k]
+            mujoco.mj_forward(self.models[i], data)
+            self._read(i)
+
+    def step(self, ctrl: np.ndarray, substeps: int, applied: np.ndarray | None = None) -> PhysicsState:
+        """Hold `ctrl` (N, nu) PD targets for `substeps` physics steps; `applied` (N, nbody, 6) external wrenches."""
+        def run(chunk: range) -> None:
+            for i in chunk:
+                model, data = self.models[i], self.datas[i]
+                data.ctrl[:] = ctrl[i]
+                if applied is not None:
+                    data.xfrc_applied[:] = applied[i]
+                mujoco.mj_step(model, data, nstep=substeps)
+                self._read(i)
+
+        if self.pool is None:
+            run(range(self.num_envs))
+        else:
+            list(self.pool.map(run, self.chunks))
+        return self.state
+
+    def _read(self, i: int) -> None:
+        model, data, s = self.models[i], self.datas[i], self.state
+        # mj_step leaves kinematics one substep behind the integrated state; refresh positions and velocities.
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        mujoco.mj_comVel(model, data)
+        s.qpos[i], s.qvel[i] = data.qpos, data.qvel
+        s.body_pos[i], s.body_quat[i] = data.xpos, data.xquat
+        s.actuator_force[i] = data.actuator_force
+        for b in range(model.nbody):
+            mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, b, s.body_vel[i, b], 0)
+        s.contact_force[i] = 0.0
+        force = np.zeros(6)
+        for c in range(data.ncon):
+            contact = data.contact[c]
+            mujoco.mj_contactForce(model, data, c, force)
+            world = contact.frame.reshape(3, 3).T @ force[:3]
+            for geom, sign in ((contact.geom1, -1.0), (contact.geom2, 1.0)):
+                s.contact_force[i, model.geom_bodyid[geom]] += sign * world
+
+    def get_states(self) -> np.ndarray:
+        """(N, S) full physics state of every environment (for checkpoints)."""
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        size = mujoco.mj_stateSize(self.models[0], spec)
+        out = np.empty((self.num_envs, size))
+        for i, (model, data) in enumerate(zip(self.models, self.datas)):
+            mujoco.mj_getState(model, data, out[i], spec)
+        return out
+
+    def set_states(self, states: np.ndarray) -> None:
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        for i, (model, data) in enumerate(zip(self.models, self.datas)):
+            mujoco.mj_setState(model, data, states[i], spec)
+            mujoco.mj_forward(model, data)
+            self._read(i)
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown()

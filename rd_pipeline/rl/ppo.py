@@ -1,0 +1,98 @@
+"""PPO on rsl-rl-lib with a multi-value-head critic: one head per reward group, GAE per head,
+advantages summed then normalized (the algorithm's only departure from rsl-rl's PPO)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from rsl_rl.algorithms import PPO
+from rsl_rl.models import MLPModel
+from rsl_rl.storage import RolloutStorage
+from tensordict import TensorDict
+
+from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
+
+
+@dataclass(frozen=True)
+class PpoConfig:
+    """Appendix "PPO, Network, and Training Parameters"."""
+
+    steps_per_env: int = 24
+    """Rollout length per environment."""
+    learning_epochs: int = 5
+    """Epochs per update."""
+    mini_batches: int = 4
+    """Mini-batches per epoch."""
+    clip: float = 0.2
+    """PPO clip."""
+    gamma: float = 0.99
+    """Discount."""
+    lam: float = 0.95
+    """GAE lambda."""
+    value_loss_coef: float = 1.0
+    """Value-loss coefficient."""
+    entropy_coef: float = 0.01
+    """Entropy coefficient."""
+    learning_rate: float = 1e-3
+    """Initial learning rate (adaptive schedule)."""
+    max_grad_norm: float = 1.0
+    """Gradient-norm limit."""
+    desired_kl: float = 0.01
+    """Target KL of the adaptive schedule."""
+    init_noise_std: float = 0.894
+    """Initial action-noise std (variance 0.8)."""
+    hidden_dims: tuple[int, ...] = (512, 256, 128)
+    """Actor and critic MLP widths (ReLU)."""
+
+
+class MultiHeadRolloutStorage(RolloutStorage):
+    """Rollout storage whose rewards, values and returns have one column per critic head."""
+
+    def __init__(self, num_envs: int, steps: int, obs: TensorDict, actions: int, heads: int) -> None:
+        super().__init__("rl", num_envs, steps, obs, (actions,))
+        self.rewards = torch.zeros(steps, num_envs, heads)
+        self.values = torch.zeros(steps, num_envs, heads)
+        self.returns = torch.zeros(steps, num_envs, heads)
+
+    def add_transition(self, transition: RolloutStorage.Transition) -> None:
+        rewards = transition.rewards
+        transition.rewards = torch.zeros(self.num_envs)  # the parent copies a scalar column; ours follows
+        step = self.step
+        super().add_transition(transition)
+        self.rewards[step].copy_(rewards)
+
+
+class MultiHeadPPO(PPO):
+    """rsl-rl PPO whose critic outputs one value per reward group."""
+
+    def process_env_step(self, obs: TensorDict, rewards: torch.Tensor, dones: torch.Tensor, extras: dict) -> None:
+        self.transition.rewards = rewards.clone()
+        self.transition.dones = dones
+        if "time_outs" in extras:  # bootstrap every head on time-outs
+            self.transition.rewards += self.gamma * self.transition.values * extras["time_outs"].unsqueeze(1).float()
+        self.storage.add_transition(self.transition)
+        self.transition.clear()
+        self.actor.reset(dones)
+        self.critic.reset(dones)
+
+    def compute_returns(self, obs: TensorDict) -> None:
+        st = self.storage
+        last_values = self.critic(obs).detach()
+        advantages, returns = multi_head_gae(st.rewards, st.values, st.dones.squeeze(-1), last_values, self.gamma, self.lam)
+        st.returns = returns
+        st.advantages = combined_advantage(advantages).unsqueeze(-1)
+
+
+def build_ppo(obs: TensorDict, num_envs: int, num_actions: int, heads: int, config: PpoConfig) -> MultiHeadPPO:
+    groups = {"actor": ["policy"], "critic": ["critic"]}
+    actor = MLPModel(obs, groups, "actor", num_actions, list(config.hidden_dims), "relu", obs_normalization=True,
+                     distribution_cfg={"class_name": "GaussianDistribution", "init_std": config.init_noise_std})
+    critic = MLPModel(obs, groups, "critic", heads, list(config.hidden_dims), "relu", obs_normalization=True)
+    storage = MultiHeadRolloutStorage(num_envs, config.steps_per_env, obs, num_actions, heads)
+    return MultiHeadPPO(
+        actor, critic, storage, num_learning_epochs=config.learning_epochs, num_mini_batches=config.mini_batches,
+        clip_param=config.clip, gamma=config.gamma, lam=config.lam, value_loss_coef=config.value_loss_coef,
+        entropy_coef=config.entropy_coef, learning_rate=config.learning_rate, max_grad_norm=config.max_grad_norm,
+        desired_kl=config.desired_kl,
+    )

@@ -1,0 +1,111 @@
+"""The training loop: rollouts, multi-head PPO updates, checkpoints, resume, logs, learning curve."""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from rd_pipeline.rl.env import TrackingEnv
+from rd_pipeline.rl.ppo import MultiHeadPPO
+from rd_pipeline.rl.rewards import GROUPS
+
+CHECKPOINT_DIR = "checkpoints"
+LOG_FILE = "training_log.jsonl"
+
+
+@dataclass
+class TrainingHistory:
+    """One row per iteration."""
+
+    rows: list[dict] = field(default_factory=list)
+    """Logged values of each iteration."""
+
+
+def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, env: TrackingEnv) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.save({
+        "iteration": iteration, "algorithm": ppo.save(), "learning_rate": ppo.learning_rate,
+        "sampler": env.sampler.state_dict(), "env": env.state_dict(), "torch_rng": torch.get_rng_state(),
+    }, path)
+
+
+def load_checkpoint(path: Path, ppo: MultiHeadPPO, env: TrackingEnv) -> int:
+    state = torch.load(path, weights_only=False)
+    ppo.load(state["algorithm"], None, strict=True)
+    ppo.learning_rate = state["learning_rate"]
+    for group in ppo.optimizer.param_groups:
+        group["lr"] = ppo.learning_rate
+    env.sampler.load_state_dict(state["sampler"])
+    env.load_state_dict(state["env"])
+    torch.set_rng_state(state["torch_rng"])
+    return int(state["iteration"])
+
+
+def train(
+    env: TrackingEnv, ppo: MultiHeadPPO, iterations: int, out_dir: Path, checkpoint_every: int,
+    start_iteration: int = 0, on_iteration: Callable[[dict], None] = lambda row: None,
+) -> TrainingHistory:
+    """Run PPO from `start_iteration` to `iterations`, checkpointing every `checkpoint_every` and at the end."""
+    history = TrainingHistory()
+    obs = env.get_observations()
+    log = (out_dir / LOG_FILE).open("a")
+    for iteration in range(start_iteration, iterations):
+        began = time.perf_counter()
+        lengths, rewards = [], []
+        with torch.inference_mode():
+            for _ in range(ppo.storage.num_transitions_per_env):
+                actions = ppo.act(obs)
+                obs, reward, dones, extras = env.step(actions)
+                ppo.process_env_step(obs, reward, dones, extras)
+                lengths += extras["episode_length"].tolist()
+                rewards.append(reward.mean(0))
+            ppo.compute_returns(obs)
+        losses = ppo.update()
+        seconds = time.perf_counter() - began
+        per_group = torch.stack(rewards).mean(0)
+        row = {
+            "iteration": iteration + 1, "seconds": round(seconds, 3),
+            "samples_per_s": round(env.num_envs * ppo.storage.num_transitions_per_env / seconds, 1),
+            "episode_length_s": round(float(np.mean(lengths)) / 50.0, 4) if lengths else None,
+            "reward": round(float(per_group.sum()), 4),
+            **{f"reward_{g}": round(float(v), 4) for g, v in zip(GROUPS, per_group)},
+            **{f"loss_{k}": round(float(v), 4) for k, v in losses.items()},
+            "learning_rate": ppo.learning_rate, "motion_far_m": round(env.motion_far, 4),
+            "penalty_scale": round(env.penalty_scale, 4),
+        }
+        history.rows.append(row)
+        log.write(json.dumps(row) + "\n")
+        log.flush()
+        on_iteration(row)
+        done = iteration + 1
+        if done % checkpoint_every == 0 or done == iterations:
+            save_checkpoint(out_dir / CHECKPOINT_DIR / f"model_{done}.pt", done, ppo, env)
+    log.close()
+    return history
+
+
+def plot_learning_curve(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    it = [r["iteration"] for r in rows]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
+    for g in GROUPS:
+        axes[0].plot(it, [r[f"reward_{g}"] for r in rows], label=g, lw=1)
+    axes[0].set_xlabel("iteration")
+    axes[0].set_ylabel("mean reward per step")
+    axes[0].legend(fontsize=7)
+    axes[1].plot(it, [r["episode_length_s"] or 0 for r in rows], lw=1)
+    axes[1].set_xlabel("iteration")
+    axes[1].set_ylabel("mean episode length (s)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

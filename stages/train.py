@@ -1,0 +1,120 @@
+"""`train`: reference + balanced prior -> residual-action PPO policy (checkpoints, log, learning curve)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from rd_pipeline.artifacts.stage import Stage, StageContext
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.rl.env_config import EnvConfig
+from rd_pipeline.rl.ppo import PpoConfig
+from rd_pipeline.robots.assets import model_files
+from rd_pipeline.sampling.sampler import SamplerConfig
+
+CURVE_FILE = "learning_curve.png"
+PROFILE_FILE = "sampler_profile.png"
+
+
+@dataclass(frozen=True)
+class TrainParams:
+    """Training budget and the environment, PPO and sampler settings (profiles set these)."""
+
+    iterations: int = 20_000
+    """PPO iterations (paper: 20K for final policies)."""
+    checkpoint_every: int = 500
+    """Iterations between checkpoints."""
+    seed: int = 0
+    """Seeds torch, the environment and the sampler."""
+    clip: str = ""
+    """Train on part of the motion, `START:END` in seconds (empty: all of it)."""
+    env: EnvConfig = EnvConfig()
+    """Environment."""
+    ppo: PpoConfig = PpoConfig()
+    """PPO."""
+    sampler: SamplerConfig = SamplerConfig()
+    """Segment sampler."""
+
+
+def clip_frames(clip: str, fps: float, n_frames: int) -> tuple[int, int]:
+    """`START:END` seconds -> [start, end) frames of the reference."""
+    if not clip:
+        return 0, n_frames
+    try:
+        start_s, end_s = (float(x) if x else None for x in clip.split(":"))
+    except ValueError:
+        raise PipelineError(f"train.clip must be START:END in seconds, got '{clip}'") from None
+    start = int(round((start_s or 0.0) * fps))
+    end = n_frames if end_s is None else min(n_frames, int(round(end_s * fps)))
+    if not 0 <= start < end - fps:
+        raise PipelineError(f"train.clip '{clip}' leaves less than one second of the {n_frames / fps:.1f} s motion")
+    return start, end
+
+
+def _run(ctx: StageContext) -> dict[str, Any]:
+    import numpy as np
+    import torch
+
+    from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+    from rd_pipeline.rl.env import TrackingEnv
+    from rd_pipeline.rl.ppo import build_ppo
+    from rd_pipeline.rl.rewards import GROUPS
+    from rd_pipeline.rl.trainer import plot_learning_curve, train
+    from rd_pipeline.robots import load_robot
+    from rd_pipeline.sampling.plots import plot_sampler_profile
+    from rd_pipeline.sampling.prior import PRIOR_FILE
+    from rd_pipeline.sampling.sampler import SegmentSampler
+
+    p: TrainParams = ctx.params
+    torch.manual_seed(p.seed)
+    robot = load_robot(ctx.robot)
+    reference = ReferenceMotion.load(ctx.upstream["reference"].path / REFERENCE_FILE)
+    with np.load(ctx.upstream["sampling_prior"].path / PRIOR_FILE) as prior:
+        weights, starts, lengths = prior["weights"], prior["starts"], prior["lengths"]
+    start, end = clip_frames(p.clip, reference.fps, reference.n_frames)
+    keep = (starts >= start) & (starts + lengths <= end)
+    reference = _slice(reference, start, end)
+    starts, lengths, weights = starts[keep] - start, lengths[keep], weights[keep]
+    balanced = torch.as_tensor(weights if weights.sum() > 0 else np.ones(len(weights)))
+    sampler = SegmentSampler(p.sampler, balanced, seed=p.seed)
+    env = TrackingEnv(robot, reference, sampler, starts, lengths, p.env, seed=p.seed)
+    ppo = build_ppo(env.get_observations(), env.num_envs, env.num_actions, len(GROUPS), p.ppo)
+    progress = ctx.track(range(p.iterations), p.iterations, f"PPO {ctx.robot}")
+    iterator = iter(progress)
+    next(iterator, None)
+
+    def on_iteration(row: dict) -> None:
+        next(iterator, None)
+
+    history = train(env, ppo, p.iterations, ctx.out_dir, p.checkpoint_every, on_iteration=on_iteration)
+    env.close()
+    plot_learning_curve(history.rows, ctx.out_dir / CURVE_FILE)
+    plot_sampler_profile(sampler.failure_rate.numpy(), sampler.probabilities().numpy(), 1 / sampler.n_segments,
+                         ctx.out_dir / PROFILE_FILE)
+    last = history.rows[-1]
+    return {
+        "iterations": p.iterations, "num_envs": p.env.num_envs, "clip_frames": [start, end],
+        "final_episode_length_s": last["episode_length_s"], "final_reward": last["reward"],
+        "samples_per_s_median": float(np.median([r["samples_per_s"] for r in history.rows])),
+        "sampler_step": sampler.step,
+    }
+
+
+def _slice(reference, start: int, end: int):
+    import dataclasses
+
+    arrays = {f.name: getattr(reference, f.name) for f in dataclasses.fields(reference)
+              if f.name not in ("fps", "joint_names", "body_names")}
+    return dataclasses.replace(reference, **{k: v[start:end] for k, v in arrays.items()})
+
+
+STAGE = Stage(
+    name="train",
+    version=1,
+    description="reference + prior -> residual-action PPO policy (multi-head critic, segment sampler)",
+    params=TrainParams,
+    provides="policy",
+    run=_run,
+    inputs=lambda robot, motion: model_files(robot),
+    requires=("reference", "sampling_prior"),
+)
