@@ -38,6 +38,8 @@ class Run:
     """Seed for stages that draw random numbers."""
     source: str | None = None
     """Force the motion source: `bvh` (parse + retarget) or `csv` (import)."""
+    clip: str | None = None
+    """Train on part of the motion, `START:END` in seconds (sets train.clip)."""
     set: tuple[str, ...] = ()
     """Parameter overrides, `stage.param=value`."""
     params_file: Path | None = None

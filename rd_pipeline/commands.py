@@ -43,7 +43,8 @@ def _pipeline(robot, motion, profile, source, params_file, assignments, seed=Non
 
 
 def run(cmd: Run, console: Console) -> int:
-    pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, cmd.source, cmd.params_file, cmd.set, cmd.seed)
+    assignments = cmd.set + ((f"train.clip={cmd.clip}",) if cmd.clip else ())
+    pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, cmd.source, cmd.params_file, assignments, cmd.seed)
     store = ArtifactStore(paths.artifacts_dir())
     console.print(f"rd-pipeline: {cmd.robot}/{cmd.motion} from {pipeline.source}, artifacts in {store.root}")
     execute(pipeline, store, start=cmd.from_, until=cmd.until, only=cmd.only, force=cmd.force, console=console)

@@ -96,8 +96,12 @@ class MujocoCpuBackend:
         s.qpos[i], s.qvel[i] = data.qpos, data.qvel
         s.body_pos[i], s.body_quat[i] = data.xpos, data.xquat
         s.actuator_force[i] = data.actuator_force
-        for b in range(model.nbody):
-            mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_BODY, b, s.body_vel[i, b], 0)
+        # cvel is the spatial velocity at each tree's centre of mass; move it to the body origins
+        # (what mj_objectVelocity does, for all bodies at once).
+        angular, linear = data.cvel[:, :3], data.cvel[:, 3:]
+        offset = data.xpos - data.subtree_com[model.body_rootid]
+        s.body_vel[i, :, :3] = angular
+        s.body_vel[i, :, 3:] = linear - np.cross(offset, angular)
         s.contact_force[i] = 0.0
         force = np.zeros(6)
         for c in range(data.ncon):

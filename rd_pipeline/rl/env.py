@@ -124,14 +124,19 @@ class TrackingEnv:
         return np.round(self.rng.uniform(lo, hi, size=count) * 50).astype(np.int64)
 
     # -- reset -------------------------------------------------------------------------------
-    def reset(self, env_ids: torch.Tensor) -> None:
-        """Reference state initialization at a frame drawn from a sampled segment, with the appendix noise."""
+    def reset(self, env_ids: torch.Tensor, frames: torch.Tensor | None = None) -> None:
+        """Reference state initialization, with the appendix noise, at `frames` or at a frame drawn
+        from a segment the sampler picks."""
         if len(env_ids) == 0:
             return
         c, k = self.config, len(env_ids)
-        segments = self.sampler.sample(k)
-        offsets = torch.as_tensor(self.rng.random(k)) * torch.as_tensor(self.segment_lengths)[segments]
-        frames = (torch.as_tensor(self.segment_starts)[segments] + offsets.long()).clamp(max=self.max_episode_length - 2)
+        if frames is None:
+            segments = self.sampler.sample(k)
+            offsets = torch.as_tensor(self.rng.random(k)) * torch.as_tensor(self.segment_lengths)[segments]
+            frames = (torch.as_tensor(self.segment_starts)[segments] + offsets.long()).clamp(max=self.max_episode_length - 2)
+        else:
+            starts = torch.as_tensor(self.segment_starts)
+            segments = (torch.searchsorted(starts, frames, right=True) - 1).clamp(min=0)
         model = self.backend.models[0]
         qpos, qvel = np.zeros((k, model.nq)), np.zeros((k, model.nv))
         f = frames.numpy()
