@@ -34,6 +34,8 @@ class Run:
     """Run just this stage."""
     force: bool = False
     """Recompute the selected stages even when cached."""
+    resume: bool = False
+    """Continue an interrupted long stage (training) from its last checkpoint."""
     seed: int = 0
     """Seed for stages that draw random numbers."""
     source: str | None = None
@@ -60,6 +62,8 @@ class StageCommand:
     """Parameter profile (default: the params file's, else smoke)."""
     force: bool = False
     """Recompute even when cached."""
+    resume: bool = False
+    """Continue an interrupted long stage (training) from its last checkpoint."""
     seed: int = 0
     """Seed for stages that draw random numbers."""
     set: tuple[str, ...] = ()

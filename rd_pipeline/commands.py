@@ -47,7 +47,8 @@ def run(cmd: Run, console: Console) -> int:
     pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, cmd.source, cmd.params_file, assignments, cmd.seed)
     store = ArtifactStore(paths.artifacts_dir())
     console.print(f"rd-pipeline: {cmd.robot}/{cmd.motion} from {pipeline.source}, artifacts in {store.root}")
-    execute(pipeline, store, start=cmd.from_, until=cmd.until, only=cmd.only, force=cmd.force, console=console)
+    execute(pipeline, store, start=cmd.from_, until=cmd.until, only=cmd.only, force=cmd.force, console=console,
+            resume=cmd.resume)
     return 0
 
 
@@ -57,7 +58,8 @@ def stage(cmd: StageCommand, console: Console) -> int:
         raise PipelineError(f"unknown stage '{cmd.name}' (stages: {', '.join(by_name)})")
     chosen = by_name[cmd.name]
     pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, chosen.source, cmd.params_file, cmd.set, cmd.seed)
-    execute(pipeline, ArtifactStore(paths.artifacts_dir()), only=cmd.name, force=cmd.force, console=console)
+    execute(pipeline, ArtifactStore(paths.artifacts_dir()), only=cmd.name, force=cmd.force, console=console,
+            resume=cmd.resume)
     return 0
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import shutil
 from dataclasses import dataclass
 from typing import Any
 
@@ -59,7 +61,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.rl.env import TrackingEnv
     from rd_pipeline.rl.ppo import build_ppo
     from rd_pipeline.rl.rewards import GROUPS
-    from rd_pipeline.rl.trainer import plot_learning_curve, train
+    from rd_pipeline.rl.trainer import CHECKPOINT_DIR, LOG_FILE, load_checkpoint, plot_learning_curve, train
     from rd_pipeline.robots import load_robot
     from rd_pipeline.sampling.plots import plot_sampler_profile
     from rd_pipeline.sampling.prior import PRIOR_FILE
@@ -79,23 +81,36 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     sampler = SegmentSampler(p.sampler, balanced, seed=p.seed)
     env = TrackingEnv(robot, reference, sampler, starts, lengths, p.env, seed=p.seed)
     ppo = build_ppo(env.get_observations(), env.num_envs, env.num_actions, len(GROUPS), p.ppo)
-    progress = ctx.track(range(p.iterations), p.iterations, f"PPO {ctx.robot}")
+    # Checkpoints and the log live in the work folder, which survives an interruption; --resume
+    # continues from its newest checkpoint, and a fresh run starts it over.
+    work = ctx.work_dir or ctx.out_dir
+    checkpoints = sorted((work / CHECKPOINT_DIR).glob("model_*.pt"), key=lambda f: int(f.stem.split("_")[1]))
+    start_iteration = 0
+    if ctx.resume and checkpoints:
+        start_iteration = load_checkpoint(checkpoints[-1], ppo, env)
+        ctx.console.print(f"  resuming from {checkpoints[-1].name}")
+    elif work.exists() and work != ctx.out_dir:
+        shutil.rmtree(work)
+    work.mkdir(parents=True, exist_ok=True)
+    progress = ctx.track(range(start_iteration, p.iterations), p.iterations - start_iteration, f"PPO {ctx.robot}")
     iterator = iter(progress)
     next(iterator, None)
-
-    def on_iteration(row: dict) -> None:
-        next(iterator, None)
-
-    history = train(env, ppo, p.iterations, ctx.out_dir, p.checkpoint_every, on_iteration=on_iteration)
+    train(env, ppo, p.iterations, work, p.checkpoint_every, start_iteration=start_iteration,
+          on_iteration=lambda row: next(iterator, None))
     env.close()
-    plot_learning_curve(history.rows, ctx.out_dir / CURVE_FILE)
+    rows = [json.loads(line) for line in (work / LOG_FILE).read_text().splitlines()]
+    if work != ctx.out_dir:
+        for item in work.iterdir():
+            shutil.move(str(item), ctx.out_dir / item.name)
+        work.rmdir()
+    plot_learning_curve(rows, ctx.out_dir / CURVE_FILE)
     plot_sampler_profile(sampler.failure_rate.numpy(), sampler.probabilities().numpy(), 1 / sampler.n_segments,
                          ctx.out_dir / PROFILE_FILE)
-    last = history.rows[-1]
+    last = rows[-1]
     return {
         "iterations": p.iterations, "num_envs": p.env.num_envs, "clip_frames": [start, end],
         "final_episode_length_s": last["episode_length_s"], "final_reward": last["reward"],
-        "samples_per_s_median": float(np.median([r["samples_per_s"] for r in history.rows])),
+        "samples_per_s_median": float(np.median([r["samples_per_s"] for r in rows])),
         "sampler_step": sampler.step,
     }
 

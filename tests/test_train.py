@@ -70,3 +70,35 @@ def test_smoke_profile_runs_the_dag_to_train(robot: str, motion: str, artifacts:
     assert (folder / "learning_curve.png").is_file() and (folder / "checkpoints" / "model_2.pt").is_file()
     metrics = json.loads((folder / "manifest.json").read_text())["metrics"]
     assert metrics["iterations"] == 2 and metrics["num_envs"] == 8
+
+
+def test_cli_resume_continues_an_interrupted_training(artifacts: Path) -> None:
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from conftest import PROJECT
+
+    args = ["run", "--robot", "h1_2", "--motion", "dance2_subject4", "--until", "train", "--profile", "smoke",
+            "--set", "train.iterations=30", "train.checkpoint_every=1"]
+    process = subprocess.Popen([sys.executable, "-m", "rd_pipeline", *args], cwd=PROJECT, env=os.environ.copy(),
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    folder = artifacts / "train" / "h1_2" / "dance2_subject4"
+    deadline = time.time() + 300
+    while not list(folder.glob(".work-*/checkpoints/model_3.pt")) and time.time() < deadline:
+        time.sleep(0.05)
+    process.send_signal(signal.SIGINT)
+    assert process.wait(timeout=120) == 130
+    (work,) = folder.glob(".work-*")
+    saved = max(int(p.stem.split("_")[1]) for p in (work / "checkpoints").glob("model_*.pt"))
+    assert 3 <= saved < 30 and not [p for p in folder.iterdir() if not p.name.startswith(".")]
+    result = cli(*args, "--resume")
+    assert result.returncode == 0, result.stderr
+    assert f"resuming from model_{saved}.pt" in result.stderr
+    (done,) = [p for p in folder.iterdir() if not p.name.startswith(".")]
+    log = [json.loads(line)["iteration"] for line in (done / "training_log.jsonl").read_text().splitlines()]
+    assert log[-1] == 30 and log[:3] == [1, 2, 3]
+    assert not list(folder.glob(".work-*"))  # moved into the artifact

@@ -146,7 +146,7 @@ def resolve_source(robot: str | None, motion: str, forced: str | None) -> str:
 
 def execute(
     pipeline: Pipeline, store: ArtifactStore, start: str | None = None, until: str | None = None,
-    only: str | None = None, force: bool = False, console: Console | None = None,
+    only: str | None = None, force: bool = False, console: Console | None = None, resume: bool = False,
 ) -> list[StageOutcome]:
     """Run the selected stages; cached artifacts are reused without doing any work."""
     console = console or Console(stderr=True)
@@ -174,7 +174,7 @@ def execute(
             outcomes.append(StageOutcome(stage.name, entry.key, existing.path, True, seconds))
             continue
         console.print(f"[cyan]run[/]    {stage.name:<9} {_label(robot, pipeline.motion)}  {entry.key}")
-        ref = _run_stage(pipeline, store, entry, refs, console, replace=existing is not None)
+        ref = _run_stage(pipeline, store, entry, refs, console, replace=existing is not None, resume=resume)
         seconds = time.perf_counter() - began
         console.print(f"[green]done[/]   {stage.name:<9} {_label(robot, pipeline.motion)}  {entry.key}  ({seconds:.2f} s) -> {ref.path}")
         refs[stage.provides] = ref
@@ -184,7 +184,7 @@ def execute(
 
 def _run_stage(
     pipeline: Pipeline, store: ArtifactStore, entry: PlannedStage, refs: dict[str, ArtifactRef],
-    console: Console, replace: bool,
+    console: Console, replace: bool, resume: bool,
 ) -> ArtifactRef:
     stage = entry.stage
     robot = pipeline.robot if stage.per_robot else None
@@ -194,6 +194,7 @@ def _run_stage(
         context = StageContext(
             robot=robot, motion=pipeline.motion, params=entry.params, inputs=entry.inputs,
             upstream={role: refs[role] for role in stage.requires}, out_dir=out, console=console,
+            work_dir=store.folder(stage.name, robot, pipeline.motion) / f".work-{entry.key}", resume=resume,
         )
         metrics = stage.run(context)
         write_manifest(out, {

@@ -40,6 +40,10 @@ class StageContext:
     """Temporary folder to write into; it becomes the artifact when the stage returns."""
     console: Console = field(default_factory=Console)
     """Where progress and messages go."""
+    work_dir: Path | None = None
+    """A folder that survives an interrupted run of this key (long stages keep checkpoints there)."""
+    resume: bool = False
+    """Continue from what `work_dir` holds instead of starting over."""
 
     def track(self, items: Iterable[T], total: int, description: str) -> Iterator[T]:
         """Iterate with a progress bar (ETA included) for long loops."""

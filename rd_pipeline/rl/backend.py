@@ -40,7 +40,7 @@ class PhysicsBackend(Protocol):
 
     def set_state(self, env_ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None: ...
 
-    def step(self, ctrl: np.ndarray, substeps: int, applied: np.ndarray | None = None) -> PhysicsState: ...
+    def step(self, ctrl: np.ndarray, substeps: int, joint_force: np.ndarray | None = None) -> PhysicsState: ...
 
 
 class MujocoCpuBackend:
@@ -70,14 +70,15 @@ class MujocoCpuBackend:
             mujoco.mj_forward(self.models[i], data)
             self._read(i)
 
-    def step(self, ctrl: np.ndarray, substeps: int, applied: np.ndarray | None = None) -> PhysicsState:
-        """Hold `ctrl` (N, nu) PD targets for `substeps` physics steps; `applied` (N, nbody, 6) external wrenches."""
+    def step(self, ctrl: np.ndarray, substeps: int, joint_force: np.ndarray | None = None) -> PhysicsState:
+        """Hold `ctrl` (N, nu) PD targets for `substeps` physics steps, with extra generalized forces
+        `joint_force` (N, nv) (random force injection) held over the same steps."""
         def run(chunk: range) -> None:
             for i in chunk:
                 model, data = self.models[i], self.datas[i]
                 data.ctrl[:] = ctrl[i]
-                if applied is not None:
-                    data.xfrc_applied[:] = applied[i]
+                if joint_force is not None:
+                    data.qfrc_applied[:] = joint_force[i]
                 mujoco.mj_step(model, data, nstep=substeps)
                 self._read(i)
 

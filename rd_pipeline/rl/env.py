@@ -203,11 +203,15 @@ class TrackingEnv:
         self.target_queue = torch.roll(self.target_queue, 1, dims=1)
         self.target_queue[:, 0] = targets
         ctrl = self.target_queue[torch.arange(n), self.delay]
-        applied = None
+        joint_force = None
         if r.enabled:
             self._push()
+            # Random force injection: 0.1 x factor x effort limit, redrawn every control step.
+            scale = r.torque_rfi * self.dr_params[:, 8:9] * self.robot.config.effort_limit
+            joint_force = np.zeros((n, self.backend.models[0].nv))
+            joint_force[:, self.dof_idx] = scale * self.rng.uniform(-1.0, 1.0, scale.shape)
         before_vel = self._state()["joint_vel"]
-        self.backend.step(ctrl.numpy().astype(np.float64), self.config.decimation, applied)
+        self.backend.step(ctrl.numpy().astype(np.float64), self.config.decimation, joint_force)
         self.frame = next_frame
         self.episode_length_buf += 1
         self.action_history = torch.roll(self.action_history, 1, dims=1)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -28,11 +29,14 @@ class TrainingHistory:
 
 
 def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, env: TrackingEnv) -> None:
+    """Written beside its final name and renamed, so an interrupted save never leaves a torn checkpoint."""
     path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_suffix(".partial")
     torch.save({
         "iteration": iteration, "algorithm": ppo.save(), "learning_rate": ppo.learning_rate,
         "sampler": env.sampler.state_dict(), "env": env.state_dict(), "torch_rng": torch.get_rng_state(),
-    }, path)
+    }, partial)
+    os.replace(partial, path)
 
 
 def load_checkpoint(path: Path, ppo: MultiHeadPPO, env: TrackingEnv) -> int:
@@ -53,6 +57,7 @@ def train(
 ) -> TrainingHistory:
     """Run PPO from `start_iteration` to `iterations`, checkpointing every `checkpoint_every` and at the end."""
     history = TrainingHistory()
+    out_dir.mkdir(parents=True, exist_ok=True)
     obs = env.get_observations()
     log = (out_dir / LOG_FILE).open("a")
     for iteration in range(start_iteration, iterations):
