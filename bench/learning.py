@@ -1,9 +1,11 @@
 """Benchmark: deterministic start-zero survival of trained checkpoints against the zero-action policy.
 
-    python bench/learning.py --train-dir ARTIFACT_DIR [--out bench/results/learning.json]
+    python bench/learning.py --robot g1 --motion dance1_subject2 --profile cpu --clip 0:10 \
+        --checkpoints DIR [--out bench/results/learning.json]
 
-Rebuilds the training environment (same robot, reference clip and settings, from the artifact's
-manifest) on nominal physics and rolls out from frame 0 with the actor's mean action.
+Rebuilds the training environment (robot, reference clip and the profile's settings, resolved by
+the same pipeline as `rd-pipeline run`) on nominal physics, and rolls out from frame 0 with the
+actor's mean action. DIR may be a finished artifact or the work folder of a run in progress.
 """
 
 from __future__ import annotations
@@ -15,8 +17,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from rd_pipeline.artifacts.stage import _override
+from rd_pipeline.artifacts.runner import Pipeline, resolve_source
+from rd_pipeline.artifacts.store import ArtifactStore
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+from rd_pipeline.params import layered_params
 from rd_pipeline.paths import artifacts_dir
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.evaluate import nominal, survival, zero_action
@@ -24,24 +28,28 @@ from rd_pipeline.rl.ppo import build_ppo
 from rd_pipeline.rl.rewards import GROUPS
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SegmentSampler
+from stages import REGISTRY
 from stages.train import TrainParams, _slice, clip_frames
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--train-dir", type=Path, required=True)
+    parser.add_argument("--robot", default="g1")
+    parser.add_argument("--motion", default="dance1_subject2")
+    parser.add_argument("--profile", default="cpu")
+    parser.add_argument("--clip", default="0:10")
+    parser.add_argument("--checkpoints", type=Path, required=True)
     parser.add_argument("--out", type=Path, default=Path("bench/results/learning.json"))
     args = parser.parse_args()
-    manifest = json.loads((args.train_dir / "manifest.json").read_text())
-    params: TrainParams = _override(TrainParams(), _flatten_tuples(manifest["params"]), "train")
-    robot = load_robot(manifest["robot"])
-    reference_key = None
-    for stage in ("retarget", "import"):
-        if stage in manifest["upstream"]:
-            reference_key = (stage, manifest["upstream"][stage])
-    reference = ReferenceMotion.load(
-        artifacts_dir() / reference_key[0] / manifest["robot"] / manifest["motion"] / reference_key[1] / REFERENCE_FILE
-    )
+    registry = {stage.name: stage for stage in REGISTRY}
+    values = layered_params(args.profile, list(registry), None, (f"train.clip={args.clip}",))
+    pipeline = Pipeline(REGISTRY, args.robot, args.motion, resolve_source(args.robot, args.motion, None), values)
+    planned = {entry.stage.name: entry for entry in pipeline.plan(pipeline.chain())}
+    params: TrainParams = planned["train"].params
+    reference_stage = next(s for s in ("retarget", "import") if s in planned)
+    folder = ArtifactStore(artifacts_dir()).find(reference_stage, args.robot, args.motion, planned[reference_stage].key)
+    reference = ReferenceMotion.load(folder.path / REFERENCE_FILE)
+    robot = load_robot(args.robot)
     start, end = clip_frames(params.clip, reference.fps, reference.n_frames)
     reference = _slice(reference, start, end)
     starts = np.arange(0, reference.n_frames, 50)
@@ -54,7 +62,8 @@ def main() -> None:
     env = make_env()
     zero = float(survival(env, zero_action(env.num_actions), torch.tensor([0]))[0])
     rows = {"clip_s": reference.n_frames / 50.0, "zero_action_survival_s": zero, "checkpoints": {}}
-    for path in sorted((args.train_dir / "checkpoints").glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[1])):
+    checkpoint_dir = args.checkpoints / "checkpoints" if (args.checkpoints / "checkpoints").is_dir() else args.checkpoints
+    for path in sorted(checkpoint_dir.glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[1])):
         env = make_env()
         ppo = build_ppo(env.get_observations(), 1, env.num_actions, len(GROUPS), params.ppo)
         ppo.load(torch.load(path, weights_only=False)["algorithm"], None, strict=True)
@@ -68,10 +77,6 @@ def main() -> None:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(rows, indent=2) + "\n")
     print(json.dumps(rows, indent=2))
-
-
-def _flatten_tuples(values: dict) -> dict:
-    return {k: _flatten_tuples(v) if isinstance(v, dict) else v for k, v in values.items()}
 
 
 if __name__ == "__main__":

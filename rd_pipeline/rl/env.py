@@ -97,6 +97,7 @@ class TrackingEnv:
         self.penalty_scale = config.penalty_scale[0]
         self.obs_frames: torch.Tensor | None = None
         self.reset(torch.arange(n))
+        self.get_observations()  # fills the observation history
 
     # -- setup -------------------------------------------------------------------------------
     def _randomized(self, base, i: int):

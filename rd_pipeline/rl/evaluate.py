@@ -23,7 +23,6 @@ def nominal(config: EnvConfig, num_envs: int) -> EnvConfig:
 def survival(env: TrackingEnv, policy: Callable[[TensorDict], torch.Tensor], start_frames: torch.Tensor) -> torch.Tensor:
     """(E,) seconds survived from each start frame (one environment per start), until failure or the motion end."""
     env.reset(torch.arange(env.num_envs), frames=start_frames)
-    env.obs_frames = None
     obs = env.get_observations()
     alive = torch.ones(env.num_envs, dtype=torch.bool)
     steps = torch.zeros(env.num_envs)
