@@ -92,11 +92,9 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     elif work.exists() and work != ctx.out_dir:
         shutil.rmtree(work)
     work.mkdir(parents=True, exist_ok=True)
-    progress = ctx.track(range(start_iteration, p.iterations), p.iterations - start_iteration, f"PPO {ctx.robot}")
-    iterator = iter(progress)
-    next(iterator, None)
-    train(env, ppo, p.iterations, work, p.checkpoint_every, start_iteration=start_iteration,
-          on_iteration=lambda row: next(iterator, None))
+    with ctx.progress(p.iterations - start_iteration, f"PPO {ctx.robot}") as advance:
+        train(env, ppo, p.iterations, work, p.checkpoint_every, start_iteration=start_iteration,
+              on_iteration=lambda row: advance(f"reward {row['reward']:.2f}  episode {row['episode_length_s'] or 0:.2f} s"))
     env.close()
     rows = [json.loads(line) for line in (work / LOG_FILE).read_text().splitlines()]
     if work != ctx.out_dir:

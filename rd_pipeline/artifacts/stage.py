@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -47,13 +48,23 @@ class StageContext:
 
     def track(self, items: Iterable[T], total: int, description: str) -> Iterator[T]:
         """Iterate with a progress bar (ETA included) for long loops."""
-        columns = (TextColumn("  {task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                   TimeElapsedColumn(), TimeRemainingColumn())
-        with Progress(*columns, console=self.console, transient=True) as progress:
-            task = progress.add_task(description, total=total)
+        with self.progress(total, description) as advance:
             for item in items:
                 yield item
-                progress.advance(task)
+                advance()
+
+    @contextmanager
+    def progress(self, total: int, description: str) -> Iterator[Callable[..., None]]:
+        """A progress bar with ETA; the yielded `advance(status="...")` moves it and shows a status line."""
+        columns = (TextColumn("  {task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                   TimeElapsedColumn(), TimeRemainingColumn(), TextColumn("{task.fields[status]}"))
+        with Progress(*columns, console=self.console, transient=True) as bar:
+            task = bar.add_task(description, total=total, status="")
+
+            def advance(status: str = "") -> None:
+                bar.update(task, advance=1, status=status)
+
+            yield advance
 
 
 @dataclass(frozen=True)
