@@ -48,8 +48,6 @@ class RetargetTargets:
     """Body -> (T, 3, 3) target orientations (pelvis, torso, feet)."""
     foot_contact: np.ndarray
     """(T, 2) left/right foot planted, from the human feet."""
-    sole_height: np.ndarray
-    """(2,) height of each robot foot body above its sole when the foot is flat."""
     human_scale: float
     """Global human-to-robot scale (leg-length ratio) applied to the root."""
 
@@ -166,7 +164,7 @@ def build_targets(
     return RetargetTargets(
         fps=fps, bodies=tuple(bodies), human_joints=tuple(joints),
         positions=np.stack([targets[j] for j in joints], axis=1), orientations=orientations,
-        foot_contact=contact, sole_height=np.asarray(sole_height, dtype=float), human_scale=root_scale,
+        foot_contact=contact, human_scale=root_scale,
     )
 
 

@@ -18,7 +18,7 @@ from rd_pipeline.rl.actions import ResidualActions
 from rd_pipeline.rl.backend import MujocoCpuBackend
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.quat import projected_gravity, rotate_inverse
-from rd_pipeline.rl.rewards import GROUPS, RewardIndices, RewardLimits, TrackingState, compute_rewards
+from rd_pipeline.rl.rewards import RewardIndices, RewardLimits, TrackingState, compute_rewards
 from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import Robot
 from rd_pipeline.sampling.sampler import SegmentSampler
@@ -82,7 +82,6 @@ class TrackingEnv:
             joint_velocity=0.9 * torch.tensor(rc.velocity_limit, dtype=DTYPE)[p],
             torque=0.85 * torch.tensor(rc.effort_limit, dtype=DTYPE),
         )
-        self.effort = torch.tensor(rc.effort_limit, dtype=DTYPE)
 
         n, a = self.num_envs, self.num_actions
         self.frame = torch.zeros(n, dtype=torch.long)

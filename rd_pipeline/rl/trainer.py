@@ -6,7 +6,6 @@ import json
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -18,14 +17,6 @@ from rd_pipeline.rl.rewards import GROUPS
 
 CHECKPOINT_DIR = "checkpoints"
 LOG_FILE = "training_log.jsonl"
-
-
-@dataclass
-class TrainingHistory:
-    """One row per iteration."""
-
-    rows: list[dict] = field(default_factory=list)
-    """Logged values of each iteration."""
 
 
 def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, env: TrackingEnv) -> None:
@@ -54,9 +45,11 @@ def load_checkpoint(path: Path, ppo: MultiHeadPPO, env: TrackingEnv) -> int:
 def train(
     env: TrackingEnv, ppo: MultiHeadPPO, iterations: int, out_dir: Path, checkpoint_every: int,
     start_iteration: int = 0, on_iteration: Callable[[dict], None] = lambda row: None,
-) -> TrainingHistory:
-    """Run PPO from `start_iteration` to `iterations`, checkpointing every `checkpoint_every` and at the end."""
-    history = TrainingHistory()
+) -> list[dict]:
+    """Run PPO from `start_iteration` to `iterations`, checkpointing every `checkpoint_every` and at the end.
+
+    Returns the logged rows of this call (the log file also holds those of earlier, resumed runs)."""
+    history: list[dict] = []
     out_dir.mkdir(parents=True, exist_ok=True)
     obs = env.get_observations()
     log = (out_dir / LOG_FILE).open("a")
@@ -84,7 +77,7 @@ def train(
             "learning_rate": ppo.learning_rate, "motion_far_m": round(env.motion_far, 4),
             "penalty_scale": round(env.penalty_scale, 4),
         }
-        history.rows.append(row)
+        history.append(row)
         log.write(json.dumps(row) + "\n")
         log.flush()
         on_iteration(row)
