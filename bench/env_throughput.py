@@ -3,8 +3,9 @@ and full PPO samples/s including the update.
 
     python bench/env_throughput.py [--robot g1] [--envs 64] [--threads 2] [--out bench/results/env_throughput.json]
 
-Raw throughput runs `mj_step` on the same simulation model in the same number of threads; the ratio
-compares physics steps per second (env steps x decimation) measured side by side in one run.
+Raw throughput runs `mj_step` on the environment's own simulation models (one per environment,
+domain-randomized) in the same number of threads; the ratio compares physics steps per second
+(env steps x decimation) measured side by side in one run.
 """
 
 from __future__ import annotations
@@ -27,16 +28,17 @@ from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.ppo import PpoConfig, build_ppo
 from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
 from rd_pipeline.sampling.segments import segment_bounds
 
 
-def raw_physics_steps_per_s(model: mujoco.MjModel, qpos: np.ndarray, ctrl: np.ndarray, envs: int, threads: int,
+def raw_physics_steps_per_s(models: list[mujoco.MjModel], qpos: np.ndarray, ctrl: np.ndarray, threads: int,
                             steps: int) -> float:
-    datas = [mujoco.MjData(model) for _ in range(envs)]
-    for d in datas:
+    """Plain `mj_step` over the environment's own (domain-randomized) models, in the same threads."""
+    envs = len(models)
+    datas = [mujoco.MjData(model) for model in models]
+    for model, d in zip(models, datas):
         d.qpos[:], d.ctrl[:] = qpos, ctrl
         mujoco.mj_forward(model, d)
     chunks = np.array_split(np.arange(envs), threads)
@@ -44,7 +46,7 @@ def raw_physics_steps_per_s(model: mujoco.MjModel, qpos: np.ndarray, ctrl: np.nd
     def run(chunk: np.ndarray) -> None:
         for _ in range(steps // 10):
             for i in chunk:
-                mujoco.mj_step(model, datas[i], nstep=10)
+                mujoco.mj_step(models[i], datas[i], nstep=10)
 
     began = time.perf_counter()
     with ThreadPoolExecutor(threads) as pool:
@@ -69,7 +71,6 @@ def main() -> None:
     sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=0)
     config = EnvConfig(num_envs=args.envs, threads=args.threads)
     env = TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=0)
-    model = simulation_model(robot)
     qpos = env.backend.datas[0].qpos.copy()
     zero = torch.zeros(args.envs, env.num_actions)
     env_rates, raw_rates = [], []
@@ -78,7 +79,7 @@ def main() -> None:
         for _ in range(50):
             env.step(zero)
         env_rates.append(args.envs * 50 * config.decimation / (time.perf_counter() - began))
-        raw_rates.append(raw_physics_steps_per_s(model, qpos, robot.config.default_pos, args.envs, args.threads, 500))
+        raw_rates.append(raw_physics_steps_per_s(env.backend.models, qpos, robot.config.default_pos, args.threads, 500))
     ppo = build_ppo(env.get_observations(), args.envs, env.num_actions, len(GROUPS), PpoConfig())
     obs = env.get_observations()
     began = time.perf_counter()
