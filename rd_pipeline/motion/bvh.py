@@ -158,7 +158,7 @@ class _Parser:
         try:
             values = np.array(tokens, dtype=np.float64)
         except ValueError:
-            bad = next(t for t in tokens if not _is_float(t))
+            bad = next(t for t in tokens if not is_float(t))
             raise self.fail(f"non-numeric value '{bad}'", line) from None
         if not np.all(np.isfinite(values)):
             bad = tokens[int(np.flatnonzero(~np.isfinite(values))[0])]
@@ -181,7 +181,7 @@ class _Parser:
         try:
             values = np.array(flat, dtype=np.float64).reshape(n_frames, self.n_channels)
         except ValueError:
-            i = next(i for i, row in enumerate(rows) if not all(_is_float(t) for t in row))
+            i = next(i for i, row in enumerate(rows) if not all(is_float(t) for t in row))
             self.numbers(rows[i], first + i + 1)
             raise  # unreachable: numbers() raised
         bad = ~np.isfinite(values)
@@ -191,7 +191,8 @@ class _Parser:
         return values
 
 
-def _is_float(token: str) -> bool:
+def is_float(token: str) -> bool:
+    """Whether `float(token)` succeeds (used to point at the offending value in error messages)."""
     try:
         float(token)
     except ValueError:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import os
 import tempfile
 import urllib.request
@@ -12,6 +11,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import DownloadColumn, Progress, TransferSpeedColumn
 
+from rd_pipeline.artifacts.keys import file_sha256
 from rd_pipeline.errors import PipelineError
 
 LAFAN_URL = "https://media.githubusercontent.com/media/ubisoft/ubisoft-laforge-animation-dataset/master/lafan1/lafan1.zip"
@@ -25,7 +25,7 @@ def install_lafan(zip_path: Path | None, target: Path, console: Console) -> list
         zip_path = _download(console)
     if not zip_path.is_file():
         raise PipelineError(f"{zip_path}: file not found")
-    digest = _sha256(zip_path)
+    digest = file_sha256(zip_path)
     if digest != LAFAN_SHA256:
         raise PipelineError(f"{zip_path}: sha256 {digest} is not the official lafan1.zip ({LAFAN_SHA256})")
     target.mkdir(parents=True, exist_ok=True)
@@ -41,14 +41,6 @@ def install_lafan(zip_path: Path | None, target: Path, console: Console) -> list
             os.replace(handle.name, destination)
             installed.append(destination)
     return installed
-
-
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with path.open("rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def _download(console: Console) -> Path:

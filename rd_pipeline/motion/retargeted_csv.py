@@ -11,6 +11,7 @@ from scipy.interpolate import interp1d
 from scipy.spatial.transform import Rotation, Slerp
 
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion.bvh import is_float
 from rd_pipeline.motion.contact import ContactThresholds, label_contacts
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
 from rd_pipeline.robots import Robot
@@ -41,7 +42,7 @@ def read_retargeted_csv(path: Path, n_joints: int) -> np.ndarray:
             try:
                 row = [float(p) for p in parts]
             except ValueError:
-                bad = next(p for p in parts if not _is_float(p))
+                bad = next(p for p in parts if not is_float(p))
                 raise PipelineError(f"{path}:{line_no}: non-numeric value '{bad}'") from None
             if not np.all(np.isfinite(row)):
                 raise PipelineError(f"{path}:{line_no}: non-finite value")
@@ -49,14 +50,6 @@ def read_retargeted_csv(path: Path, n_joints: int) -> np.ndarray:
     if len(rows) < 2:
         raise PipelineError(f"{path}: needs at least 2 frames, got {len(rows)}")
     return np.array(rows)
-
-
-def _is_float(token: str) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
 
 
 def import_retargeted_csv(
