@@ -4,8 +4,9 @@ and full PPO samples/s including the update.
     python bench/env_throughput.py [--robot g1] [--envs 64] [--threads 2] [--out bench/results/env_throughput.json]
 
 Raw throughput runs `mj_step` on the environment's own simulation models (one per environment,
-domain-randomized) in the same number of threads; the ratio compares physics steps per second
-(env steps x decimation) measured side by side in one run.
+domain-randomized), started from copies of the environments' states after each timed block, in the
+same number of threads; the ratio compares physics steps per second (env steps x decimation)
+measured side by side, interleaved, in one run.
 """
 
 from __future__ import annotations
@@ -33,14 +34,20 @@ from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
 from rd_pipeline.sampling.segments import segment_bounds
 
 
-def raw_physics_steps_per_s(models: list[mujoco.MjModel], qpos: np.ndarray, ctrl: np.ndarray, threads: int,
+def raw_physics_steps_per_s(models: list[mujoco.MjModel], source: list[mujoco.MjData], threads: int,
                             steps: int) -> float:
-    """Plain `mj_step` over the environment's own (domain-randomized) models, in the same threads."""
+    """Plain `mj_step` over the environment's own (domain-randomized) models, from copies of the
+    environments' current states and controls (the same contacts to solve), in the same threads."""
     envs = len(models)
-    datas = [mujoco.MjData(model) for model in models]
-    for model, d in zip(models, datas):
-        d.qpos[:], d.ctrl[:] = qpos, ctrl
-        mujoco.mj_forward(model, d)
+    spec = mujoco.mjtState.mjSTATE_INTEGRATION
+    datas = []
+    for model, data in zip(models, source):
+        state = np.empty(mujoco.mj_stateSize(model, spec))
+        mujoco.mj_getState(model, data, state, spec)
+        copy = mujoco.MjData(model)
+        mujoco.mj_setState(model, copy, state, spec)
+        mujoco.mj_forward(model, copy)
+        datas.append(copy)
     chunks = np.array_split(np.arange(envs), threads)
 
     def run(chunk: np.ndarray) -> None:
@@ -71,7 +78,6 @@ def main() -> None:
     sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=0)
     config = EnvConfig(num_envs=args.envs, threads=args.threads)
     env = TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=0)
-    qpos = env.backend.datas[0].qpos.copy()
     zero = torch.zeros(args.envs, env.num_actions)
     env_rates, raw_rates = [], []
     for _ in range(args.repeats):  # interleaved, so both see the same machine state
@@ -79,7 +85,7 @@ def main() -> None:
         for _ in range(50):
             env.step(zero)
         env_rates.append(args.envs * 50 * config.decimation / (time.perf_counter() - began))
-        raw_rates.append(raw_physics_steps_per_s(env.backend.models, qpos, robot.config.default_pos, args.threads, 500))
+        raw_rates.append(raw_physics_steps_per_s(env.backend.models, env.backend.datas, args.threads, 500))
     ppo = build_ppo(env.get_observations(), args.envs, env.num_actions, len(GROUPS), PpoConfig())
     obs = env.get_observations()
     began = time.perf_counter()

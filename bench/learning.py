@@ -68,7 +68,7 @@ def main() -> None:
         ppo = build_ppo(env.get_observations(), 1, env.num_actions, len(GROUPS), params.ppo)
         ppo.load(torch.load(path, weights_only=False)["algorithm"], None, strict=True)
         ppo.eval_mode()
-        mean_action = lambda obs: ppo.actor(obs, stochastic_output=False)  # noqa: E731
+        mean_action = lambda obs: ppo.actor(obs, stochastic_output=False)
         rows["checkpoints"][path.stem] = float(survival(env, mean_action, torch.tensor([0]))[0])
         print(path.stem, rows["checkpoints"][path.stem], flush=True)
     best = max(rows["checkpoints"].values())

@@ -22,9 +22,9 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # one core, as the issue asks
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from rd_pipeline import paths  # noqa: E402
-from rd_pipeline.motion.bvh import read_bvh  # noqa: E402
-from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh  # noqa: E402
+from rd_pipeline import paths
+from rd_pipeline.motion.bvh import read_bvh
+from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
 
 
 def main() -> None:

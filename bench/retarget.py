@@ -18,17 +18,17 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from rd_pipeline import paths  # noqa: E402
-from rd_pipeline.evaluation.retarget_quality import retarget_quality  # noqa: E402
-from rd_pipeline.motion.bvh import read_bvh  # noqa: E402
-from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh  # noqa: E402
-from rd_pipeline.motion.retargeted_csv import import_retargeted_csv  # noqa: E402
-from rd_pipeline.retarget.retarget import retarget  # noqa: E402
-from rd_pipeline.robots import load_robot  # noqa: E402
-from stages.import_motion import ImportParams  # noqa: E402
-from stages.retarget import RetargetParams  # noqa: E402
+from rd_pipeline import paths
+from rd_pipeline.evaluation.retarget_quality import retarget_quality
+from rd_pipeline.motion.bvh import read_bvh
+from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
+from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+from rd_pipeline.retarget.retarget import retarget
+from rd_pipeline.robots import load_robot
+from stages.import_motion import ImportParams
+from stages.retarget import RetargetParams
 
 COLUMNS = [
     "fps_frames_per_s", "penetration_max_mm", "penetration_p95_mm", "skate_stance_mean_mm_s",

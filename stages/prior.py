@@ -33,7 +33,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     plot_balancing(stats, prior, ctx.out_dir / PLOT_FILE)
     support = stats.histograms.sum(axis=0) > 0
     before, after = flatness(prior.marginal_before, support), flatness(prior.marginal_after, support)
-    per_joint = lambda values: {j: round(float(v), 4) for j, v in zip(stats.selected, values)}  # noqa: E731
+    per_joint = lambda values: {j: round(float(v), 4) for j, v in zip(stats.selected, values)}
     return {
         "segments": stats.n_segments,
         "solver": prior.solver,

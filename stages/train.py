@@ -123,7 +123,7 @@ def _slice(reference, start: int, end: int):
 
 STAGE = Stage(
     name="train",
-    version=1,
+    version=2,
     description="reference + prior -> residual-action PPO policy (multi-head critic, segment sampler)",
     params=TrainParams,
     provides="policy",

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import LAFAN_DIR, cli
 from scipy.spatial.transform import Rotation
 
-from conftest import LAFAN_DIR, cli
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.bvh import forward_kinematics, read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 import yaml
-
 from conftest import LAFAN_DIR, PROJECT
+
 from stages import stage_names
 
 

@@ -7,9 +7,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import pytest
+from conftest import RETARGETED_DIR, cli
 from scipy.spatial.transform import Rotation
 
-from conftest import RETARGETED_DIR, cli
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.reference import ReferenceMotion

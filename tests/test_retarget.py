@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import LAFAN_DIR, cli
 from scipy.spatial.transform import Rotation
 
-from conftest import LAFAN_DIR, cli
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.retarget_quality import retarget_quality
 from rd_pipeline.motion.bvh import read_bvh

@@ -8,8 +8,8 @@ import json
 import mujoco
 import numpy as np
 import pytest
-
 from conftest import RETARGETED_DIR
+
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.retarget_quality import FootMeshes, QualityThresholds, retarget_quality
 from rd_pipeline.motion.contact import ContactThresholds

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import math
 
+import mujoco
 import pytest
 import torch
 
-from rd_pipeline.rl.actions import ActionConfig, ResidualActions, pd_torque
+from rd_pipeline.rl.actions import ActionConfig, ResidualActions
 from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
-from rd_pipeline.rl.rewards import GROUPS, RewardIndices, RewardLimits, TrackingState, compute_rewards
+from rd_pipeline.rl.rewards import GROUPS, AdaptiveSigma, RewardIndices, RewardLimits, TrackingState, compute_rewards
+from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
 
 N, B, P = 3, 5, 4
@@ -17,7 +19,7 @@ N, B, P = 3, 5, 4
 
 def _state(**changes) -> TrackingState:
     """Robot exactly on the reference, standing still, no torques: every penalty is zero."""
-    zeros = lambda *shape: torch.zeros(*shape, dtype=torch.float64)  # noqa: E731
+    zeros = lambda *shape: torch.zeros(*shape, dtype=torch.float64)
     quat = zeros(N, B, 4)
     quat[..., 0] = 1.0
     body = torch.arange(N * B * 3, dtype=torch.float64).reshape(N, B, 3) / 10
@@ -29,7 +31,7 @@ def _state(**changes) -> TrackingState:
         ref_joint_vel=zeros(N, P), feet_contact=torch.ones(N, 2, dtype=torch.bool),
         ref_feet_contact=torch.ones(N, 2, dtype=torch.bool), feet_force=zeros(N, 2, 3), feet_speed=zeros(N, 2),
         torque=zeros(N, P), joint_acc=zeros(N, P), action=zeros(N, P), last_action=zeros(N, P),
-        second_last_action=zeros(N, P), undesired_contacts=zeros(N), terminated=torch.zeros(N, dtype=torch.bool),
+        second_last_action=zeros(N, P), feet_air_time=zeros(N, 2), undesired_contacts=zeros(N), terminated=torch.zeros(N, dtype=torch.bool),
     )
     values.update(changes)
     return TrackingState(**values)
@@ -43,7 +45,7 @@ LIMITS = RewardLimits(
 
 
 def test_perfect_tracking_earns_every_tracking_weight() -> None:
-    groups, terms = compute_rewards(_state(), INDICES, LIMITS, penalty_scale=0.8)
+    groups, terms, _ = compute_rewards(_state(), INDICES, LIMITS, penalty_scale=0.8)
     assert GROUPS == ("body", "root", "joint", "contact", "regularization")
     expected = {"body": 2.0 + 0.5 + 1.8 + 0.5 + 2.0 + 0.5 + 0.5 + 0.5 + 0.5, "root": 2.25, "joint": 1.5,
                 "contact": 0.5, "regularization": 0.0}
@@ -64,9 +66,14 @@ def test_hand_computed_terms() -> None:
     quat = _state().body_quat.clone()
     half = math.radians(10) / 2
     quat[:, 0] = torch.tensor([math.cos(half), 0.0, 0.0, math.sin(half)], dtype=torch.float64)  # pelvis yawed 10 deg
+    air = torch.zeros(N, 2, dtype=torch.float64)
+    air[:, 0] = 0.45  # left foot touches down after 0.45 s in the air
+    air[2, 1] = 0.6  # ... and env 2's right foot after 0.6 s, where the reference has it in the air
+    reference_contact = torch.ones(N, 2, dtype=torch.bool)
+    reference_contact[2, 1] = False
     state = _state(body_pos=body, joint_pos=joints, torque=torque, feet_force=force, terminated=terminated,
-                   body_quat=quat)
-    _, terms = compute_rewards(state, INDICES, LIMITS, penalty_scale=0.8)
+                   body_quat=quat, feet_air_time=air, ref_feet_contact=reference_contact)
+    _, terms, _ = compute_rewards(state, INDICES, LIMITS, penalty_scale=0.8)
     assert torch.allclose(terms["body_pos"], torch.full((N,), 2.0 * math.exp(-1.0), dtype=torch.float64))
     assert torch.allclose(terms["body_pos_rel"], torch.full((N,), 0.5, dtype=torch.float64))  # a shift is not a pose error
     assert torch.allclose(terms["joint_pos"], torch.full((N,), 1.0 * math.exp(-1.0), dtype=torch.float64))
@@ -76,14 +83,22 @@ def test_hand_computed_terms() -> None:
     assert torch.allclose(terms["torque"], torch.full((N,), -1e-6 * 0.8 * 4 * 100, dtype=torch.float64))
     assert torch.allclose(terms["foot_contact_force"], torch.full((N,), -0.01 * 0.8 * 100, dtype=torch.float64))
     assert terms["termination"].tolist() == pytest.approx([-200 * 0.8, 0.0, 0.0])
+    assert terms["feet_air_time"].tolist() == pytest.approx([0.2, 0.2, 0.2])  # not scaled by the penalty curriculum
 
 
-def test_adaptive_sigma_widens_the_kernel() -> None:
+def test_adaptive_sigma_follows_the_error_and_never_widens() -> None:
     body = _state().body_pos.clone()
-    body[:, :, 0] += 0.02
-    _, terms = compute_rewards(_state(body_pos=body), INDICES, LIMITS, 1.0, sigma_scale={"body_pos": 2.0})
-    assert terms["body_pos"][0].item() == pytest.approx(2.0 * math.exp(-0.25))
-
+    body[:, :, 0] += 0.01  # e = 1e-4, a quarter of the table's sigma^2 = 4e-4
+    adaptive = AdaptiveSigma(alpha=0.5)
+    _, _, errors = compute_rewards(_state(body_pos=body), INDICES, LIMITS, 1.0)
+    adaptive.update(errors)
+    assert adaptive.sigma()["body_pos"] == pytest.approx(math.sqrt(0.5 * 4e-4 + 0.5 * 1e-4))
+    _, terms, _ = compute_rewards(_state(body_pos=body), INDICES, LIMITS, 1.0, sigma=adaptive.sigma())
+    assert terms["body_pos"][0].item() == pytest.approx(2.0 * math.exp(-1e-4 / 2.5e-4))
+    body[:, :, 0] += 1.0  # far worse tracking: the kernel stays at the table width
+    for _ in range(20):
+        adaptive.update(compute_rewards(_state(body_pos=body), INDICES, LIMITS, 1.0)[2])
+    assert adaptive.sigma()["body_pos"] == pytest.approx(0.02)
 
 def _single_head_gae(rewards, values, dones, last, gamma, lam):
     advantage, out = torch.zeros_like(last), torch.zeros_like(rewards)
@@ -121,7 +136,9 @@ def test_residual_mask_clip_and_limits() -> None:
     reference = default.repeat(2, 1)
     actions = torch.full((2, len(mask)), 0.4, dtype=torch.float64)
     actions[1] = 1e6  # far beyond the clip
-    selective = ResidualActions(ActionConfig(), mask, default, lower, upper).targets(actions, reference)
+    residual = ResidualActions(ActionConfig(), mask, default, lower, upper)
+    assert residual.active.tolist() == list(config.residual_indices)  # the policy outputs only masked joints
+    selective = residual.targets(actions[:, : residual.size], reference)
     assert torch.equal(selective[:, ~mask], reference[:, ~mask])  # masked-out joints follow the reference
     assert torch.allclose(selective[0, mask], reference[0, mask] + 0.25 * 0.4)
     assert torch.all(selective <= upper) and torch.all(selective >= lower)
@@ -133,7 +150,15 @@ def test_residual_mask_clip_and_limits() -> None:
         ResidualActions(ActionConfig(mode="half"), mask, default, lower, upper)
 
 
-def test_pd_torque_is_clipped() -> None:
-    kp, kd, limit = torch.tensor([100.0, 100.0]), torch.tensor([2.0, 2.0]), torch.tensor([25.0, 25.0])
-    tau = pd_torque(torch.tensor([0.1, 1.0]), torch.zeros(2), torch.tensor([1.0, 0.0]), kp, kd, limit)
-    assert tau.tolist() == pytest.approx([8.0, 25.0])
+def test_pd_torque_is_clipped_inside_the_physics_loop() -> None:
+    robot = load_robot("g1")
+    model = simulation_model(robot)
+    data = mujoco.MjData(model)
+    data.qpos[2], data.qpos[3] = 2.0, 1.0  # in the air, so only the actuators act
+    knee = robot.config.joint_names.index("left_knee_joint")
+    data.ctrl[:] = robot.config.default_pos
+    data.ctrl[knee] += 1.5  # kp 150 x 1.5 rad = 225 N m, above the 139 N m effort limit
+    mujoco.mj_step(model, data)
+    assert data.actuator_force[knee] == pytest.approx(robot.config.effort_limit[knee])
+    elbow = robot.config.joint_names.index("left_elbow_joint")
+    assert data.actuator_force[elbow] == pytest.approx(40.0 * 0.3)  # below its limit: plain kp x error (from q = 0)

@@ -11,8 +11,8 @@ import time
 from pathlib import Path
 
 import pytest
-
 from conftest import PROJECT, cli
+
 from rd_pipeline.artifacts.keys import artifact_key
 from rd_pipeline.artifacts.runner import Pipeline, execute, resolve_source
 from rd_pipeline.artifacts.store import ArtifactStore

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from conftest import cli
 from rerun.chunk import RrdReader
 
-from conftest import cli
 from rd_pipeline.robots import load_robot
 
 

@@ -6,7 +6,7 @@ import dataclasses
 import subprocess
 import time
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -206,7 +206,7 @@ def _run_stage(
             "inputs": {str(path): entry.input_hashes[label] for label, path in entry.inputs.items()},
             "upstream": entry.upstream,
             "code_version": code_version(),
-            "created_at": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "created_at": datetime.now(UTC).isoformat(timespec="seconds"),
             "duration_s": round(time.perf_counter() - began, 3),
             "metrics": metrics,
         })

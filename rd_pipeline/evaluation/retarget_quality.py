@@ -19,7 +19,6 @@ from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.model import collision_geoms
 
-
 QUALITY_FILE = "quality.json"
 """File name of a quality report inside an artifact (retarget and import stages)."""
 

@@ -13,9 +13,9 @@ from rd_pipeline.evaluation.retarget_quality import FootMeshes, colliding_frames
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
-from rd_pipeline.retarget.smoothing import smooth_cover
 from rd_pipeline.retarget.ik import RetargetIk
 from rd_pipeline.retarget.settings import IkSettings, IkWeights, TargetShaping
+from rd_pipeline.retarget.smoothing import smooth_cover
 from rd_pipeline.retarget.targets import RetargetTargets, build_targets
 from rd_pipeline.robots import Robot
 

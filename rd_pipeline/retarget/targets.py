@@ -16,9 +16,9 @@ from scipy.spatial.transform import Rotation, Slerp
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.contact import ContactThresholds, label_contacts
 from rd_pipeline.motion.human import HumanMotion
-from rd_pipeline.retarget.smoothing import smooth_cover
-from rd_pipeline.retarget.settings import TargetShaping
 from rd_pipeline.retarget.frames import frame_from_axes, yaw_and_pitch, yaw_pitch_frame
+from rd_pipeline.retarget.settings import TargetShaping
+from rd_pipeline.retarget.smoothing import smooth_cover
 from rd_pipeline.robots import Robot
 
 # LAFAN1 joints that define frames; the robot side uses whichever bodies the config maps to them.

@@ -23,27 +23,30 @@ class ActionConfig:
 
 
 class ResidualActions:
-    """Turns policy outputs (N, P) into joint position targets for the P policy joints."""
+    """Turns policy outputs (N, A) into joint position targets for the P policy joints.
+
+    The policy outputs one value per joint it may move (`active`): the masked joints in `selective`
+    mode, every policy joint otherwise. Outputs for joints the mask zeroes would only add noise to
+    the PPO update (their KL, entropy and action-rate terms carry no signal), so they do not exist.
+    """
 
     def __init__(self, config: ActionConfig, residual_mask: torch.Tensor, default_pos: torch.Tensor,
                  lower: torch.Tensor, upper: torch.Tensor) -> None:
         if config.mode not in ACTION_MODES:
             raise ValueError(f"action mode must be one of {', '.join(ACTION_MODES)}, got '{config.mode}'")
         self.config = config
-        self.mask = residual_mask.to(default_pos.dtype) if config.mode == "selective" else torch.ones_like(default_pos)
+        self.active = torch.nonzero(residual_mask).flatten() if config.mode == "selective" else torch.arange(len(default_pos))
         self.default_pos, self.lower, self.upper = default_pos, lower, upper
 
+    @property
+    def size(self) -> int:
+        """A, the policy's action dimension."""
+        return len(self.active)
+
     def targets(self, actions: torch.Tensor, reference_next: torch.Tensor) -> torch.Tensor:
-        """Joint targets inside [lower, upper]; masked-out joints follow the reference exactly."""
+        """(N, P) joint targets inside [lower, upper]; joints outside `active` follow the reference exactly."""
         scaled = self.config.scale * actions.clamp(-self.config.clip, self.config.clip)
-        if self.config.mode == "none":
-            target = self.default_pos + scaled
-        else:
-            target = reference_next + self.mask * scaled
+        base = self.default_pos.expand_as(reference_next) if self.config.mode == "none" else reference_next
+        target = base.clone()
+        target[:, self.active] += scaled.to(target.dtype)
         return torch.maximum(torch.minimum(target, self.upper), self.lower)
-
-
-def pd_torque(target: torch.Tensor, q: torch.Tensor, qd: torch.Tensor, kp: torch.Tensor, kd: torch.Tensor,
-              effort_limit: torch.Tensor) -> torch.Tensor:
-    """PD torque toward `target`, clipped to the effort limits (run at every physics step)."""
-    return (kp * (target - q) - kd * qd).clamp(-effort_limit, effort_limit)

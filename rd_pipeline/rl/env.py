@@ -18,7 +18,7 @@ from rd_pipeline.rl.actions import ResidualActions
 from rd_pipeline.rl.backend import MujocoCpuBackend
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.quat import projected_gravity, rotate_inverse
-from rd_pipeline.rl.rewards import RewardIndices, RewardLimits, TrackingState, compute_rewards
+from rd_pipeline.rl.rewards import AdaptiveSigma, RewardIndices, RewardLimits, TrackingState, compute_rewards
 from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import Robot
 from rd_pipeline.sampling.sampler import SegmentSampler
@@ -38,7 +38,6 @@ class TrackingEnv:
         self.segment_starts, self.segment_lengths = segment_starts, segment_lengths
         rc = robot.config
         self.policy_idx = torch.as_tensor(rc.policy_indices)
-        self.num_actions = len(rc.policy_joints)
         self.max_episode_length = reference.n_frames
 
         base = simulation_model(robot, config.physics_dt)
@@ -60,7 +59,7 @@ class TrackingEnv:
             keypoints=tuple(i for i, b in enumerate(tracked) if b not in rc.foot_bodies)[-3:],
         )
         # Reference tensors.
-        t = lambda x: torch.as_tensor(np.asarray(x), dtype=DTYPE)  # noqa: E731
+        t = lambda x: torch.as_tensor(np.asarray(x), dtype=DTYPE)
         self.ref_joint_pos, self.ref_joint_vel = t(reference.joint_pos), t(reference.joint_vel)
         self.ref_root_pos, self.ref_root_quat = t(reference.root_pos), t(reference.root_quat)
         self.ref_body_pos, self.ref_body_quat = t(reference.body_pos_w[:, ref_bodies]), t(reference.body_quat_w[:, ref_bodies])
@@ -72,10 +71,12 @@ class TrackingEnv:
 
         lower, upper = (torch.tensor(x, dtype=DTYPE) for x in robot.joint_range.T)
         self.default_pos = torch.tensor(rc.default_pos, dtype=DTYPE)
-        mask = torch.zeros(self.num_actions, dtype=torch.bool)
+        mask = torch.zeros(len(rc.policy_joints), dtype=torch.bool)
         mask[list(rc.residual_indices)] = True
         p = self.policy_idx
         self.actions = ResidualActions(config.actions, mask, self.default_pos[p], lower[p], upper[p])
+        self.num_actions = self.actions.size
+        self.sigma = AdaptiveSigma(config.adaptive_sigma_alpha)
         middle, half = (upper + lower) / 2, (upper - lower) / 2
         self.limits = RewardLimits(
             joint_lower=(middle - 0.9 * half)[p], joint_upper=(middle + 0.9 * half)[p],
@@ -90,7 +91,8 @@ class TrackingEnv:
         self.action_history = torch.zeros(n, 3, a, dtype=DTYPE)
         self.delay = torch.as_tensor(self.dr_params[:, 7], dtype=torch.long)
         self.target_queue = torch.zeros(n, config.randomization.max_delay_steps + 1, len(rc.joint_names), dtype=DTYPE)
-        self.last_joint_vel = torch.zeros(n, a, dtype=DTYPE)
+        self.last_joint_vel = torch.zeros(n, len(rc.policy_joints), dtype=DTYPE)
+        self.feet_air_time = torch.zeros(n, 2, dtype=DTYPE)
         self.next_push = torch.as_tensor(self._push_times(n))
         self.motion_far = config.motion_far_init_m
         self.penalty_scale = config.penalty_scale[0]
@@ -153,6 +155,7 @@ class TrackingEnv:
         self.start_segment[env_ids] = segments
         self.episode_length_buf[env_ids] = 0
         self.action_history[env_ids] = 0.0
+        self.feet_air_time[env_ids] = 0.0
         self.target_queue[env_ids] = torch.as_tensor(qpos[:, self.qpos_idx], dtype=DTYPE)[:, None]
         self.last_joint_vel[env_ids] = torch.as_tensor(qvel[:, self.dof_idx], dtype=DTYPE)[:, self.policy_idx]
         if self.obs_frames is not None:
@@ -161,7 +164,7 @@ class TrackingEnv:
     # -- observations ------------------------------------------------------------------------
     def _state(self) -> dict[str, torch.Tensor]:
         s = self.backend.state
-        t = lambda x: torch.as_tensor(x, dtype=DTYPE)  # noqa: E731
+        t = lambda x: torch.as_tensor(x, dtype=DTYPE)
         quat = t(s.qpos[:, 3:7])
         return {
             "joint_pos": t(s.qpos[:, self.qpos_idx])[:, self.policy_idx],
@@ -220,7 +223,8 @@ class TrackingEnv:
         state = self._tracking_state(actions, before_vel)
         terminated = self._failed(state)
         state.terminated = terminated
-        rewards, terms = compute_rewards(state, self.indices, self.limits, self.penalty_scale)
+        rewards, terms, errors = compute_rewards(state, self.indices, self.limits, self.penalty_scale, self.sigma.sigma())
+        self.sigma.update(errors)
         time_out = self.frame >= self.max_episode_length - 1
         dones = terminated | time_out
         done_ids = torch.nonzero(dones).flatten()
@@ -246,9 +250,12 @@ class TrackingEnv:
 
     def _tracking_state(self, actions: torch.Tensor, before_vel: torch.Tensor) -> TrackingState:
         s, st = self.backend.state, self._state()
-        t = lambda x: torch.as_tensor(x, dtype=DTYPE)  # noqa: E731
+        t = lambda x: torch.as_tensor(x, dtype=DTYPE)
         f = self.frame
         force = t(s.contact_force[:, self.feet_sim])
+        contact = force[..., 2] > 1.0
+        touchdown_air_time = self.feet_air_time * (contact & (self.feet_air_time > 0))
+        self.feet_air_time = torch.where(contact, 0.0, self.feet_air_time + 1.0 / 50.0)
         body_vel = t(s.body_vel[:, self.sim_bodies])
         feet_vel = t(s.body_vel[:, self.feet_sim])
         return TrackingState(
@@ -258,7 +265,7 @@ class TrackingEnv:
             ref_body_pos=self.ref_body_pos[f], ref_body_quat=self.ref_body_quat[f],
             ref_body_lin_vel=self.ref_body_lin_vel[f], ref_body_ang_vel=self.ref_body_ang_vel[f],
             ref_joint_pos=self.ref_joint_pos[f][:, self.policy_idx], ref_joint_vel=self.ref_joint_vel[f][:, self.policy_idx],
-            feet_contact=force[..., 2] > 1.0, ref_feet_contact=self.ref_contact[f],
+            feet_contact=contact, ref_feet_contact=self.ref_contact[f], feet_air_time=touchdown_air_time,
             feet_force=force, feet_speed=feet_vel[..., 3:5].norm(dim=-1), torque=t(s.actuator_force),
             joint_acc=(st["joint_vel"] - before_vel) * 50.0, action=actions,
             last_action=self.action_history[:, 1], second_last_action=self.action_history[:, 2],
@@ -295,6 +302,7 @@ class TrackingEnv:
             "target_queue": self.target_queue.clone(), "last_joint_vel": self.last_joint_vel.clone(),
             "next_push": self.next_push.clone(), "obs_frames": self.obs_frames.clone(), "motion_far": self.motion_far,
             "penalty_scale": self.penalty_scale, "rng": self.rng.bit_generator.state,
+            "feet_air_time": self.feet_air_time.clone(), "sigma_variance": dict(self.sigma.variance),
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -304,6 +312,7 @@ class TrackingEnv:
         self.target_queue, self.last_joint_vel = state["target_queue"].clone(), state["last_joint_vel"].clone()
         self.next_push, self.obs_frames = state["next_push"].clone(), state["obs_frames"].clone()
         self.motion_far, self.penalty_scale = state["motion_far"], state["penalty_scale"]
+        self.feet_air_time, self.sigma.variance = state["feet_air_time"].clone(), dict(state["sigma_variance"])
         self.rng.bit_generator.state = state["rng"]
 
     def close(self) -> None:

@@ -61,6 +61,8 @@ class EnvConfig:
     """Per-step change of the motion-far threshold and of the penalty scale."""
     curriculum_down_up: tuple[float, float] = (40.0, 42.0)
     """Mean episode length (steps) below which the curricula ease, above which they tighten."""
+    adaptive_sigma_alpha: float = 1e-3
+    """EMA rate of the adaptive tracking sigma (0 keeps the table values)."""
     penalty_scale: tuple[float, float, float] = (0.8, 0.8, 1.0)
     """Penalty curriculum: initial, min, max."""
     rsi_joint_pos: float = 0.1

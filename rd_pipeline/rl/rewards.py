@@ -59,6 +59,8 @@ class TrackingState:
     """(N, P)."""
     second_last_action: torch.Tensor
     """(N, P)."""
+    feet_air_time: torch.Tensor
+    """(N, 2) seconds a foot was in the air, on the step it touches down (0 on every other step)."""
     undesired_contacts: torch.Tensor
     """(N,) count of bodies other than the feet touching the ground."""
     terminated: torch.Tensor
@@ -156,6 +158,10 @@ TERMS: tuple[RewardTerm, ...] = (
     # Contact mask: the kernel of the fraction of feet whose contact state disagrees with the reference.
     RewardTerm("contact_mask", "contact", 0.5, 1.0,
                lambda s, i, lim: (s.feet_contact != s.ref_feet_contact).float().mean(-1)),
+    # Feet air time (legged-gym form): at touchdown, the air time beyond 0.25 s, for feet the reference
+    # also has on the ground, so real steps pay and shuffling or hopping off-reference does not.
+    RewardTerm("feet_air_time", "contact", 1.0, None,
+               lambda s, i, lim: ((s.feet_air_time - 0.25) * ((s.feet_air_time > 0) & s.ref_feet_contact)).sum(-1)),
     RewardTerm("torque", "regularization", -1e-6, None, lambda s, i, lim: _sq(s.torque)),
     RewardTerm("dof_vel", "regularization", -1e-4, None, lambda s, i, lim: _sq(s.joint_vel)),
     RewardTerm("dof_acc", "regularization", -2.5e-8, None, lambda s, i, lim: _sq(s.joint_acc)),
@@ -174,29 +180,54 @@ TERMS: tuple[RewardTerm, ...] = (
     RewardTerm("termination", "regularization", -200.0, None, lambda s, i, lim: s.terminated.float()),
     RewardTerm("collision", "regularization", -30.0, None, lambda s, i, lim: s.undesired_contacts.float()),
 )
-"""The paper's reward table. Feet air time (1.0) is not here: it needs per-foot timers kept by the env."""
+"""The paper's reward table."""
 
 GROUPS: tuple[str, ...] = tuple(dict.fromkeys(term.group for term in TERMS))
 
 
 def compute_rewards(
     state: TrackingState, indices: RewardIndices, limits: RewardLimits, penalty_scale: float,
-    sigma_scale: dict[str, float] | None = None, terms: tuple[RewardTerm, ...] = TERMS,
-) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-    """(N, G) reward per group (the critic's heads, in `GROUPS` order) and (N,) value per term.
+    sigma: dict[str, float] | None = None, terms: tuple[RewardTerm, ...] = TERMS,
+) -> tuple[torch.Tensor, dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+    """(N, G) reward per group (the critic's heads, in `GROUPS` order), (N,) value per term and
+    (N,) error per term.
 
-    `sigma_scale` multiplies a tracking term's sigma (the adaptive-sigma curriculum); penalties are
-    multiplied by `penalty_scale` (the penalty curriculum).
+    `sigma` replaces a tracking term's table sigma (the adaptive-sigma curriculum); regularization
+    penalties are multiplied by `penalty_scale` (the penalty curriculum).
     """
     per_group = {group: torch.zeros(state.joint_pos.shape[0], dtype=state.joint_pos.dtype) for group in GROUPS}
-    per_term = {}
+    values, errors = {}, {}
     for term in terms:
         error = term.error(state, indices, limits)
-        if term.sigma is None:
+        if term.sigma is not None:
+            width = (sigma or {}).get(term.name, term.sigma)
+            value = term.weight * torch.exp(-error / width**2)
+        elif term.group == "regularization":
             value = term.weight * penalty_scale * error
         else:
-            sigma = term.sigma * (sigma_scale or {}).get(term.name, 1.0)
-            value = term.weight * torch.exp(-error / sigma**2)
-        per_term[term.name] = value
+            value = term.weight * error
+        values[term.name], errors[term.name] = value, error
         per_group[term.group] = per_group[term.group] + value
-    return torch.stack([per_group[g] for g in GROUPS], dim=-1), per_term
+    return torch.stack([per_group[g] for g in GROUPS], dim=-1), values, errors
+
+
+class AdaptiveSigma:
+    """Origin-based adaptive tracking sigma (appendix: alpha = 1e-3).
+
+    Each tracking term's sigma^2 follows an exponential moving average of its batch-mean error,
+    starting at and never wider than the table value (the origin), so the kernel tightens as
+    tracking improves instead of saturating at a reward that no longer separates good from better.
+    """
+
+    def __init__(self, alpha: float, terms: tuple[RewardTerm, ...] = TERMS) -> None:
+        self.alpha = alpha
+        self.origin = {t.name: t.sigma**2 for t in terms if t.sigma is not None}
+        self.variance = dict(self.origin)
+
+    def update(self, errors: dict[str, torch.Tensor]) -> None:
+        for name, origin in self.origin.items():
+            ema = (1 - self.alpha) * self.variance[name] + self.alpha * float(errors[name].mean())
+            self.variance[name] = min(origin, ema)
+
+    def sigma(self) -> dict[str, float]:
+        return {name: variance**0.5 for name, variance in self.variance.items()}

@@ -7,11 +7,11 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from rd_pipeline.sampling.prior import BalancedPrior  # noqa: E402
-from rd_pipeline.sampling.segments import SegmentStats  # noqa: E402
+from rd_pipeline.sampling.prior import BalancedPrior
+from rd_pipeline.sampling.segments import SegmentStats
 
 
 def plot_segment_statistics(stats: SegmentStats, joint_pos: np.ndarray, joints: tuple[str, ...], path: Path) -> None:
