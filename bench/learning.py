@@ -29,7 +29,7 @@ from rd_pipeline.rl.rewards import GROUPS
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SegmentSampler
 from stages import REGISTRY
-from stages.train import TrainParams, _slice, clip_frames
+from stages.train import TrainParams, clip_frames
 
 
 def main() -> None:
@@ -51,7 +51,7 @@ def main() -> None:
     reference = ReferenceMotion.load(folder.path / REFERENCE_FILE)
     robot = load_robot(args.robot)
     start, end = clip_frames(params.clip, reference.fps, reference.n_frames)
-    reference = _slice(reference, start, end)
+    reference = reference.frames(start, end)
     starts = np.arange(0, reference.n_frames, 50)
     lengths = np.minimum(50, reference.n_frames - starts)
 

@@ -94,7 +94,8 @@ class Status:
 
 @dataclass(frozen=True)
 class View:
-    """Write (or show) a rerun recording: human skeleton and robot reference on one timeline."""
+    """Write (or show) a rerun recording: human skeleton, robot reference and, once validated, the
+    tracked robot of the sim2sim start-zero rollout, on one timeline."""
 
     robot: str = DEFAULT_ROBOT
     """Robot."""

@@ -109,7 +109,7 @@ def _pairs_in_store(store: ArtifactStore, robot: str | None, motion: str | None)
 
 
 def view(cmd: View, console: Console) -> int:
-    from rd_pipeline.viz.recording import record_motion
+    from rd_pipeline.viz.recording import TRACKED_FILE, record_motion
 
     pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, cmd.source, None, ())
     store = ArtifactStore(paths.artifacts_dir())
@@ -117,7 +117,11 @@ def view(cmd: View, console: Console) -> int:
     motion_stages = [s.name for s in pipeline.chain() if s.provides in ("human_motion", "reference")]
     outcomes = execute(pipeline, store, until=motion_stages[-1], console=console) if motion_stages else []
     artifacts = {o.name: o.path for o in outcomes}
-    path = record_motion(cmd.robot, cmd.motion, artifacts, cmd.out)
+    # The tracked robot is shown when this configuration has been validated; view never trains.
+    planned = {entry.stage.name: entry for entry in pipeline.plan(pipeline.chain())}
+    validated = store.find("validate", cmd.robot, cmd.motion, planned["validate"].key) if "validate" in planned else None
+    tracked = validated.path / TRACKED_FILE if validated else None
+    path = record_motion(cmd.robot, cmd.motion, artifacts, cmd.out, tracked)
     if path is not None:
         console.print(f"wrote {path}")
         if cmd.spawn:

@@ -75,12 +75,13 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         weights, starts, lengths = prior["weights"], prior["starts"], prior["lengths"]
     start, end = clip_frames(p.clip, reference.fps, reference.n_frames)
     keep = (starts >= start) & (starts + lengths <= end)
-    reference = _slice(reference, start, end)
+    reference = reference.frames(start, end)
     starts, lengths, weights = starts[keep] - start, lengths[keep], weights[keep]
     balanced = torch.as_tensor(weights if weights.sum() > 0 else np.ones(len(weights)))
     sampler = SegmentSampler(p.sampler, balanced, seed=p.seed)
     env = TrackingEnv(robot, reference, sampler, starts, lengths, p.env, seed=p.seed)
     ppo = build_ppo(env.get_observations(), env.num_envs, env.num_actions, len(GROUPS), p.ppo)
+    observation_size = int(env.get_observations()["policy"].shape[1])
     # Checkpoints and the log live in the work folder, which survives an interruption; --resume
     # continues from its newest checkpoint, and a fresh run starts it over.
     work = ctx.work_dir or ctx.out_dir
@@ -107,18 +108,11 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     last = rows[-1]
     return {
         "iterations": p.iterations, "num_envs": p.env.num_envs, "clip_frames": [start, end],
+        "observation_size": observation_size, "num_actions": env.num_actions,
         "final_episode_length_s": last["episode_length_s"], "final_reward": last["reward"],
         "samples_per_s_median": float(np.median([r["samples_per_s"] for r in rows])),
         "sampler_step": sampler.step,
     }
-
-
-def _slice(reference, start: int, end: int):
-    import dataclasses
-
-    arrays = {f.name: getattr(reference, f.name) for f in dataclasses.fields(reference)
-              if f.name not in ("fps", "joint_names", "body_names")}
-    return dataclasses.replace(reference, **{k: v[start:end] for k, v in arrays.items()})
 
 
 STAGE = Stage(

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import mujoco
@@ -52,6 +52,12 @@ class ReferenceMotion:
     @property
     def duration_s(self) -> float:
         return self.n_frames / self.fps
+
+    def frames(self, start: int, end: int) -> ReferenceMotion:
+        """Frames [start, end) of this motion (a training clip)."""
+        per_frame = {f.name: getattr(self, f.name)[start:end] for f in fields(self)
+                     if f.name not in ("fps", "joint_names", "body_names")}
+        return replace(self, **per_frame)
 
     def save(self, path: Path) -> None:
         arrays = {f.name: getattr(self, f.name) for f in fields(self)}

@@ -17,6 +17,7 @@ from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.rl.actions import ResidualActions
 from rd_pipeline.rl.backend import MujocoCpuBackend
 from rd_pipeline.rl.env_config import EnvConfig
+from rd_pipeline.rl.observations import actor_terms
 from rd_pipeline.rl.quat import projected_gravity, rotate_inverse
 from rd_pipeline.rl.rewards import AdaptiveSigma, RewardIndices, RewardLimits, TrackingState, compute_rewards
 from rd_pipeline.rl.sim_model import simulation_model
@@ -39,6 +40,7 @@ class TrackingEnv:
         rc = robot.config
         self.policy_idx = torch.as_tensor(rc.policy_indices)
         self.max_episode_length = reference.n_frames
+        self.step_dt = config.physics_dt * config.decimation
 
         base = simulation_model(robot, config.physics_dt)
         self.dr_params = np.zeros((self.num_envs, 9))  # mass, friction, kp, kd, com xyz, delay, rfi factor
@@ -76,6 +78,7 @@ class TrackingEnv:
         p = self.policy_idx
         self.actions = ResidualActions(config.actions, mask, self.default_pos[p], lower[p], upper[p])
         self.num_actions = self.actions.size
+        self.actor_terms = actor_terms(len(rc.policy_joints), self.num_actions)
         self.sigma = AdaptiveSigma(config.adaptive_sigma_alpha)
         middle, half = (upper + lower) / 2, (upper - lower) / 2
         self.limits = RewardLimits(
@@ -123,7 +126,7 @@ class TrackingEnv:
 
     def _push_times(self, count: int) -> np.ndarray:
         lo, hi = self.config.randomization.push_interval_s
-        return np.round(self.rng.uniform(lo, hi, size=count) * 50).astype(np.int64)
+        return np.round(self.rng.uniform(lo, hi, size=count) / self.step_dt).astype(np.int64)
 
     # -- reset -------------------------------------------------------------------------------
     def reset(self, env_ids: torch.Tensor, frames: torch.Tensor | None = None) -> None:
@@ -177,11 +180,12 @@ class TrackingEnv:
     def _actor_frame(self) -> torch.Tensor:
         st = self._state()
         next_frame = (self.frame + 1).clamp(max=self.max_episode_length - 1)
-        return torch.cat([
-            st["joint_pos"] - self.default_pos[self.policy_idx], 0.05 * st["joint_vel"],
-            projected_gravity(st["root_quat"]), 0.25 * st["base_ang_vel"], self.action_history[:, 0],
-            self.ref_joint_pos[next_frame][:, self.policy_idx],
-        ], dim=-1)
+        values = {
+            "joint_pos": st["joint_pos"] - self.default_pos[self.policy_idx], "joint_vel": st["joint_vel"],
+            "projected_gravity": projected_gravity(st["root_quat"]), "base_ang_vel": st["base_ang_vel"],
+            "last_action": self.action_history[:, 0], "ref_joint_pos_next": self.ref_joint_pos[next_frame][:, self.policy_idx],
+        }
+        return torch.cat([term.scale * values[term.name] for term in self.actor_terms], dim=-1)
 
     def get_observations(self) -> TensorDict:
         if self.obs_frames is None:
@@ -225,6 +229,10 @@ class TrackingEnv:
         state.terminated = terminated
         rewards, terms, errors = compute_rewards(state, self.indices, self.limits, self.penalty_scale, self.sigma.sigma())
         self.sigma.update(errors)
+        # Weights are per second, as in legged_gym: a step earns weight x dt. This keeps returns within
+        # reach of PPO's clipped value loss (0.2 per update); at full scale the -200 termination
+        # alone puts the values in the hundreds and the critic cannot follow.
+        rewards = rewards * self.step_dt
         time_out = self.frame >= self.max_episode_length - 1
         dones = terminated | time_out
         done_ids = torch.nonzero(dones).flatten()
@@ -255,7 +263,7 @@ class TrackingEnv:
         force = t(s.contact_force[:, self.feet_sim])
         contact = force[..., 2] > 1.0
         touchdown_air_time = self.feet_air_time * (contact & (self.feet_air_time > 0))
-        self.feet_air_time = torch.where(contact, 0.0, self.feet_air_time + 1.0 / 50.0)
+        self.feet_air_time = torch.where(contact, 0.0, self.feet_air_time + self.step_dt)
         body_vel = t(s.body_vel[:, self.sim_bodies])
         feet_vel = t(s.body_vel[:, self.feet_sim])
         return TrackingState(
@@ -267,7 +275,7 @@ class TrackingEnv:
             ref_joint_pos=self.ref_joint_pos[f][:, self.policy_idx], ref_joint_vel=self.ref_joint_vel[f][:, self.policy_idx],
             feet_contact=contact, ref_feet_contact=self.ref_contact[f], feet_air_time=touchdown_air_time,
             feet_force=force, feet_speed=feet_vel[..., 3:5].norm(dim=-1), torque=t(s.actuator_force),
-            joint_acc=(st["joint_vel"] - before_vel) * 50.0, action=actions,
+            joint_acc=(st["joint_vel"] - before_vel) / self.step_dt, action=actions,
             last_action=self.action_history[:, 1], second_last_action=self.action_history[:, 2],
             undesired_contacts=(t(s.contact_force[:, self.undesired]).norm(dim=-1) > 1.0).sum(-1).to(DTYPE),
             terminated=torch.zeros(self.num_envs, dtype=torch.bool),

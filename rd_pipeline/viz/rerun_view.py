@@ -13,7 +13,6 @@ import numpy as np
 import rerun as rr
 
 from rd_pipeline.motion.human import HumanMotion
-from rd_pipeline.motion.reference import ReferenceMotion
 
 FRAME_TIMELINE = "frame"
 TIME_TIMELINE = "time"
@@ -21,8 +20,8 @@ HUMAN_COLOR = (230, 140, 40)
 ROBOT_COLOR = (60, 140, 230)
 
 
-def _times(n_frames: int, fps: float) -> list[rr.TimeColumn]:
-    frames = np.arange(n_frames)
+def _times(n_frames: int, fps: float, first_frame: int = 0) -> list[rr.TimeColumn]:
+    frames = np.arange(first_frame, first_frame + n_frames)
     return [rr.TimeColumn(FRAME_TIMELINE, sequence=frames), rr.TimeColumn(TIME_TIMELINE, duration=frames / fps)]
 
 
@@ -52,25 +51,26 @@ def log_human(rec: rr.RecordingStream, human: HumanMotion, entity: str = "human"
 
 
 def log_robot_meshes(
-    rec: rr.RecordingStream, model: mujoco.MjModel, reference: ReferenceMotion, entity: str,
-    color: tuple[int, int, int] = ROBOT_COLOR,
+    rec: rr.RecordingStream, model: mujoco.MjModel, body_names: list[str], body_pos_w: np.ndarray,
+    body_quat_w: np.ndarray, fps: float, entity: str, color: tuple[int, int, int] = ROBOT_COLOR, first_frame: int = 0,
 ) -> None:
-    """The robot's visual meshes, one static mesh per body, moved by per-frame body transforms.
+    """The robot's visual meshes, one static mesh per body, moved by per-frame body transforms
+    (`body_pos_w` (T, B, 3), `body_quat_w` (T, B, 4) wxyz, bodies named by `body_names`).
 
     The meshes are decimated to their vertex sets as MuJoCo compiled them; each body's geoms are
     merged into one mesh in the body frame, so a frame costs one transform per body.
     """
-    times = _times(reference.n_frames, reference.fps)
-    for b, name in enumerate(reference.body_names):
+    times = _times(len(body_pos_w), fps, first_frame)
+    for b, name in enumerate(body_names):
         body_id = model.body(name).id
         vertices, faces = _body_mesh(model, body_id)
         if not len(vertices):
             continue
         path = f"{entity}/{name}"
         rec.log(path, rr.Mesh3D(vertex_positions=vertices, triangle_indices=faces, albedo_factor=[*color, 255]), static=True)
-        quat_xyzw = reference.body_quat_w[:, b][:, [1, 2, 3, 0]]
+        quat_xyzw = body_quat_w[:, b][:, [1, 2, 3, 0]]
         rec.send_columns(path, indexes=times,
-                         columns=rr.Transform3D.columns(translation=reference.body_pos_w[:, b], quaternion=quat_xyzw))
+                         columns=rr.Transform3D.columns(translation=body_pos_w[:, b], quaternion=quat_xyzw))
 
 
 def _body_mesh(model: mujoco.MjModel, body_id: int) -> tuple[np.ndarray, np.ndarray]:

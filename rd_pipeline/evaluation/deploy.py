@@ -1,0 +1,129 @@
+"""A deploy-style control loop: 50 Hz policy, 500 Hz physics, observations from raw simulator state.
+
+It reads nothing but `policy.json`, the TorchScript policy, the reference motion and the robot's
+MJCF, the way a robot-side loop would: joint positions and velocities, the pelvis quaternion and
+angular velocity come from `qpos`/`qvel` by joint name, and the observation is assembled from the
+layout in `policy.json`. Many rollouts (one per start frame) run side by side; their physics steps
+run in threads, one policy call serves all of them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+
+import mujoco
+import numpy as np
+
+from rd_pipeline.export.policy_spec import PolicySpec
+from rd_pipeline.motion.reference import ReferenceMotion
+
+Policy = Callable[[np.ndarray], np.ndarray]
+"""(R, observation_size) float32 -> (R, num_actions)."""
+
+
+def projected_gravity(quat_wxyz: np.ndarray) -> np.ndarray:
+    """(R, 3) world -z expressed in the body frame of each (R, 4) orientation."""
+    w, x, y, z = quat_wxyz.T
+    # Third row of the rotation matrix, negated: R^T [0, 0, -1].
+    return -np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1)
+
+
+class DeployController:
+    """Observation and action side of the loop for R rollouts at once."""
+
+    def __init__(self, spec: PolicySpec, model: mujoco.MjModel, reference: ReferenceMotion, rollouts: int) -> None:
+        self.spec = spec
+        joints = spec.get("joints")
+        actuated, policy = joints["actuated"], joints["policy"]
+        self.qpos_idx = np.array([model.jnt_qposadr[model.joint(j).id] for j in policy])
+        self.dof_idx = np.array([model.jnt_dofadr[model.joint(j).id] for j in policy])
+        default = np.asarray(joints["default_pos"])
+        self.default_actuated = default
+        self.policy_in_actuated = np.array([actuated.index(j) for j in policy])
+        self.default_policy = default[self.policy_in_actuated]
+        self.lower, self.upper = np.asarray(joints["policy_lower"]), np.asarray(joints["policy_upper"])
+        self.outputs = np.array([policy.index(j) for j in spec.get("action.outputs")])
+        self.reference_joints = reference.joint_pos[:, [reference.joint_names.index(j) for j in policy]]
+        self.terms = spec.get("observation.terms")
+        self.history = spec.get("observation.history")
+        self.rollouts = rollouts
+        self.frame = np.zeros(rollouts, dtype=np.int64)
+        self.last_action = np.zeros((rollouts, len(self.outputs)))
+        self.frames = np.zeros((rollouts, self.history, spec.get("observation.frame_size")), dtype=np.float32)
+
+    def _next_frame(self) -> np.ndarray:
+        return np.minimum(self.frame + 1, len(self.reference_joints) - 1)
+
+    def _frame(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
+        values = {
+            "joint_pos": qpos[:, self.qpos_idx] - self.default_policy, "joint_vel": qvel[:, self.dof_idx],
+            "projected_gravity": projected_gravity(qpos[:, 3:7]), "base_ang_vel": qvel[:, 3:6],
+            "last_action": self.last_action, "ref_joint_pos_next": self.reference_joints[self._next_frame()],
+        }
+        return np.concatenate([t["scale"] * values[t["name"]] for t in self.terms], axis=-1)
+
+    def reset(self, qpos: np.ndarray, qvel: np.ndarray, frames: np.ndarray) -> None:
+        """Start every rollout at reference frame `frames[r]`; the history starts full of the first frame."""
+        self.frame = frames.astype(np.int64).copy()
+        self.last_action[:] = 0.0
+        self.frames[:] = self._frame(qpos, qvel)[:, None]
+
+    def observe(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
+        """Push the current frame into the history; (R, observation_size), oldest frame first."""
+        self.frames = np.concatenate([self.frames[:, 1:], self._frame(qpos, qvel)[:, None]], axis=1)
+        return self.frames.reshape(self.rollouts, -1)
+
+    def current(self) -> np.ndarray:
+        return self.frames.reshape(self.rollouts, -1)
+
+    def targets(self, action: np.ndarray) -> np.ndarray:
+        """(R, actuated) PD targets for this control step, per `policy.json`'s action block; advances the frame."""
+        a = self.spec.get("action")
+        base = np.broadcast_to(self.default_policy, (self.rollouts, len(self.default_policy))) if a["mode"] == "none" \
+            else self.reference_joints[self._next_frame()]
+        policy_targets = base.copy()
+        policy_targets[:, self.outputs] += a["scale"] * np.clip(action, -a["clip"], a["clip"])
+        policy_targets = np.clip(policy_targets, self.lower, self.upper)
+        ctrl = np.tile(self.default_actuated, (self.rollouts, 1))
+        ctrl[:, self.policy_in_actuated] = policy_targets
+        self.last_action = np.asarray(action, dtype=np.float64).copy()
+        self.frame = self._next_frame()
+        return ctrl
+
+
+class ParallelPhysics:
+    """R copies of one model, stepped in threads (MuJoCo releases the GIL inside `mj_step`)."""
+
+    def __init__(self, models: list[mujoco.MjModel], threads: int) -> None:
+        self.models = models
+        self.datas = [mujoco.MjData(m) for m in models]
+        self.pool = ThreadPoolExecutor(max(1, threads))
+        self.chunks = [c for c in np.array_split(np.arange(len(models)), max(1, threads)) if len(c)]
+
+    def set_state(self, i: int, qpos: np.ndarray, qvel: np.ndarray) -> None:
+        model, data = self.models[i], self.datas[i]
+        mujoco.mj_resetData(model, data)
+        data.qpos[:], data.qvel[:] = qpos, qvel
+        mujoco.mj_forward(model, data)
+
+    def step(self, ctrl: np.ndarray, substeps: int, active: np.ndarray) -> None:
+        def run(chunk: np.ndarray) -> None:
+            for i in chunk:
+                if active[i]:
+                    self.datas[i].ctrl[:] = ctrl[i]
+                    mujoco.mj_step(self.models[i], self.datas[i], nstep=substeps)
+                    mujoco.mj_kinematics(self.models[i], self.datas[i])
+                    mujoco.mj_comPos(self.models[i], self.datas[i])
+                    mujoco.mj_comVel(self.models[i], self.datas[i])
+
+        list(self.pool.map(run, self.chunks))
+
+    def qpos(self) -> np.ndarray:
+        return np.stack([d.qpos for d in self.datas])
+
+    def qvel(self) -> np.ndarray:
+        return np.stack([d.qvel for d in self.datas])
+
+    def close(self) -> None:
+        self.pool.shutdown()

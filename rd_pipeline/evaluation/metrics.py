@@ -1,0 +1,73 @@
+"""Validation metrics (SPEC "Metrics"): protocol summaries, error means, drift with bootstrap CI,
+and the reduction of several seeds to a mean with a 95% Student-t interval."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+from rd_pipeline.evaluation.sim2sim import Rollout
+
+ERROR_METRICS = ("E_g_mpbpe", "E_mpbpe", "E_mpjpe", "E_mpjve", "E_mpbve")
+SUCCESS_THRESHOLDS_S = (10, 20, 30)
+DRIFT_BINS = 6
+
+
+def summarize(rollouts: list[Rollout], control_hz: float) -> dict[str, float | None]:
+    """Fixed-grid summary: completion %, mean survival (s), success at 10/20/30 s, error means.
+
+    Success at T counts the rollouts that survived T seconds among those whose start left at least
+    T seconds of reference (None when no start did). Errors are means over every step survived.
+    """
+    survival = np.array([r.steps for r in rollouts]) / control_hz
+    out: dict[str, float | None] = {
+        "rollouts": len(rollouts),
+        "completion_pct": round(100.0 * float(np.mean([r.completed for r in rollouts])), 2),
+        "mean_survival_s": round(float(survival.mean()), 3),
+    }
+    for threshold in SUCCESS_THRESHOLDS_S:
+        eligible = [r for r in rollouts if r.remaining_steps >= threshold * control_hz]
+        out[f"success_{threshold}s_pct"] = (
+            round(100.0 * float(np.mean([r.steps >= threshold * control_hz for r in eligible])), 2) if eligible else None
+        )
+    for name in ERROR_METRICS:
+        values = np.concatenate([r.errors[name] for r in rollouts])
+        out[name] = round(float(values.mean()), 2) if len(values) else None
+    return out
+
+
+def drift(rollouts: list[Rollout], rng: np.random.Generator, resamples: int = 1000) -> list[dict[str, float]]:
+    """E_g_mpbpe in `DRIFT_BINS` relative time bins of each rollout, with a bootstrap 95% CI.
+
+    Each rollout contributes its mean error per bin; the CI resamples rollouts (or, with a single
+    rollout, its steps within the bin)."""
+    per_rollout = [np.array_split(r.errors["E_g_mpbpe"], DRIFT_BINS) for r in rollouts if r.steps >= DRIFT_BINS]
+    out = []
+    for b in range(DRIFT_BINS):
+        samples = [chunk[b] for chunk in per_rollout]
+        if not samples:
+            out.append({"bin": b, "mean": None, "ci_low": None, "ci_high": None})
+            continue
+        units = np.array([s.mean() for s in samples]) if len(samples) > 1 else samples[0]
+        low, high = bootstrap_ci(units, rng, resamples)
+        out.append({"bin": b, "mean": round(float(units.mean()), 2), "ci_low": round(low, 2), "ci_high": round(high, 2)})
+    return out
+
+
+def bootstrap_ci(values: np.ndarray, rng: np.random.Generator, resamples: int = 1000) -> tuple[float, float]:
+    """Percentile 95% interval of the mean."""
+    if len(values) == 1:
+        return float(values[0]), float(values[0])
+    means = rng.choice(values, size=(resamples, len(values)), replace=True).mean(axis=1)
+    return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
+
+
+def t_interval(values: list[float]) -> dict[str, float | int | None]:
+    """Mean and 95% Student-t half-width over seeds (half-width None for a single seed)."""
+    array = np.asarray([v for v in values if v is not None], dtype=float)
+    if len(array) == 0:
+        return {"mean": None, "ci95": None, "n": 0}
+    if len(array) == 1:
+        return {"mean": round(float(array[0]), 3), "ci95": None, "n": 1}
+    half = stats.t.ppf(0.975, len(array) - 1) * array.std(ddof=1) / np.sqrt(len(array))
+    return {"mean": round(float(array.mean()), 3), "ci95": round(float(half), 3), "n": len(array)}

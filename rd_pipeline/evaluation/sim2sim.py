@@ -1,0 +1,174 @@
+"""Sim2sim rollouts of an exported policy (or the zero-action baseline) and their per-step errors.
+
+Every rollout starts on the reference (no noise) at one start frame and runs the deploy loop until
+it fails or reaches the end of the reference. Failure per SPEC: the pelvis gravity direction more
+than `orientation_limit_rad` from the reference's, a termination body farther than `motion_far_m`
+from its reference, or a body other than the feet touching the floor.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from rd_pipeline.evaluation.deploy import DeployController, ParallelPhysics, Policy, projected_gravity
+from rd_pipeline.export.policy_spec import PolicySpec
+from rd_pipeline.motion.reference import ReferenceMotion
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """How rollouts start and when they fail."""
+
+    grid_s: float = 1.0
+    """Fixed-grid protocol: a rollout starts every `grid_s` seconds along the reference."""
+    motion_far_m: float = 0.5
+    """Failure: a termination body this far from its reference."""
+    orientation_limit_rad: float = 0.75
+    """Failure: pelvis gravity direction this far from the reference's."""
+    threads: int = 2
+    """Threads stepping the rollouts' physics."""
+
+
+@dataclass(frozen=True)
+class BodySets:
+    """Which bodies the metrics and failure checks look at (names in the MJCF and the reference)."""
+
+    root: str
+    tracked: tuple[str, ...]
+    termination: tuple[str, ...]
+    feet: tuple[str, ...]
+
+
+@dataclass
+class Rollout:
+    """One rollout: how long it lasted and its per-step errors (one value per control step survived)."""
+
+    start_frame: int
+    steps: int
+    completed: bool
+    remaining_steps: int
+    """Control steps from the start to the end of the reference (the most it could survive)."""
+    errors: dict[str, np.ndarray]
+    """`E_g_mpbpe`, `E_mpbpe` (mm), `E_mpjpe` (mrad), `E_mpjve` (mrad/s), `E_mpbve` (mm/s), per step."""
+    body_pos: np.ndarray | None
+    """(steps + 1, nbody, 3) world positions of every body, for the recording (first rollout only)."""
+    body_quat: np.ndarray | None
+    """(steps + 1, nbody, 4) wxyz (first rollout only)."""
+
+
+def run_rollouts(spec: PolicySpec, models: list[mujoco.MjModel], reference: ReferenceMotion, policy: Policy,
+                 start_frames: np.ndarray, bodies: BodySets, protocol: Protocol) -> list[Rollout]:
+    """Roll out `policy` from each start frame (rollout k on `models[k]`), all in one batched loop;
+    the first rollout also keeps its body poses for the recording."""
+    count, dt = len(start_frames), 1.0 / spec.get("rates.control_hz")
+    model = models[0]
+    physics = ParallelPhysics(models, protocol.threads)
+    controller = DeployController(spec, model, reference, count)
+    body_id = lambda names: np.array([model.body(n).id for n in names])  # noqa: E731
+    ref_body = lambda names: np.array([reference.body_names.index(n) for n in names])  # noqa: E731
+    tracked, tracked_ref = body_id(bodies.tracked), ref_body(bodies.tracked)
+    term, term_ref = body_id(bodies.termination), ref_body(bodies.termination)
+    root, root_ref = model.body(bodies.root).id, reference.body_names.index(bodies.root)
+    allowed = set(body_id(bodies.feet).tolist()) | {0}
+    floor = [g for g in range(model.ngeom) if model.geom_bodyid[g] == 0]
+    policy_joints = spec.get("joints.policy")
+    ref_joint = np.array([reference.joint_names.index(j) for j in policy_joints])
+    qpos0 = np.zeros((count, model.nq))
+    qvel0 = np.zeros((count, model.nv))
+    f = start_frames
+    qpos0[:, :3], qpos0[:, 3:7] = reference.root_pos[f], reference.root_quat[f]
+    qvel0[:, :3] = reference.body_lin_vel_w[f, root_ref]
+    for k in range(count):
+        rot = np.empty(9)
+        mujoco.mju_quat2Mat(rot, reference.root_quat[f[k]])
+        qvel0[k, 3:6] = rot.reshape(3, 3).T @ reference.body_ang_vel_w[f[k], root_ref]
+    for j, name in enumerate(reference.joint_names):
+        joint = model.joint(name)
+        qpos0[:, model.jnt_qposadr[joint.id]] = reference.joint_pos[f, j]
+        qvel0[:, model.jnt_dofadr[joint.id]] = reference.joint_vel[f, j]
+    for k in range(count):
+        physics.set_state(k, qpos0[k], qvel0[k])
+    controller.reset(physics.qpos(), physics.qvel(), start_frames)
+
+    last = reference.n_frames - 1
+    alive = np.ones(count, dtype=bool)
+    terminated = np.zeros(count, dtype=bool)
+    steps = np.zeros(count, dtype=np.int64)
+    errors: list[dict[str, np.ndarray]] = []
+    first = physics.datas[0]
+    poses = [(first.xpos.copy(), first.xquat.copy())]
+    previous_pos = np.stack([d.xpos[tracked] for d in physics.datas])
+    obs = controller.current()
+    while alive.any():
+        action = policy(obs.astype(np.float32))
+        ctrl = controller.targets(action)
+        physics.step(ctrl, spec.decimation, alive)
+        qpos, qvel = physics.qpos(), physics.qvel()
+        xpos = np.stack([d.xpos.copy() for d in physics.datas])
+        xquat = np.stack([d.xquat.copy() for d in physics.datas])
+        frame = controller.frame
+        ref_pos = reference.body_pos_w[frame][:, tracked_ref]
+        pos = xpos[:, tracked]
+        rel = pos - xpos[:, root : root + 1]
+        ref_rel = ref_pos - reference.body_pos_w[frame][:, root_ref : root_ref + 1]
+        velocity = (pos - previous_pos) / dt
+        previous_pos = pos
+        errors.append({
+            "E_g_mpbpe": 1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean(-1),
+            "E_mpbpe": 1000 * np.linalg.norm(rel - ref_rel, axis=-1).mean(-1),
+            "E_mpjpe": 1000 * np.abs(qpos[:, controller.qpos_idx] - reference.joint_pos[frame][:, ref_joint]).mean(-1),
+            "E_mpjve": 1000 * np.abs(qvel[:, controller.dof_idx] - reference.joint_vel[frame][:, ref_joint]).mean(-1),
+            "E_mpbve": 1000 * np.linalg.norm(velocity - reference.body_lin_vel_w[frame][:, tracked_ref], axis=-1).mean(-1),
+        })
+        poses.append((xpos[0], xquat[0]))
+        tilt = np.arccos(np.clip((projected_gravity(xquat[:, root]) *
+                                  projected_gravity(reference.body_quat_w[frame, root_ref])).sum(-1), -1.0, 1.0))
+        far = np.linalg.norm(xpos[:, term] - reference.body_pos_w[frame][:, term_ref], axis=-1).max(-1)
+        touching = np.array([_bad_contact(m, d, floor, allowed) for m, d in zip(models, physics.datas)])
+        failed = (tilt > protocol.orientation_limit_rad) | (far > protocol.motion_far_m) | touching
+        steps += alive
+        terminated |= alive & failed
+        alive &= ~failed & (frame < last)
+        obs = controller.observe(qpos, qvel)
+    out = []
+    for k in range(count):
+        n = int(steps[k])
+        out.append(Rollout(
+            start_frame=int(start_frames[k]), steps=n, completed=not terminated[k],
+            remaining_steps=int(last - start_frames[k]),
+            errors={name: np.array([e[name][k] for e in errors[:n]]) for name in errors[0]},
+            body_pos=np.stack([p[0] for p in poses[: n + 1]]) if k == 0 else None,
+            body_quat=np.stack([p[1] for p in poses[: n + 1]]) if k == 0 else None,
+        ))
+    physics.close()
+    return out
+
+
+def _bad_contact(model: mujoco.MjModel, data: mujoco.MjData, floor: list[int], allowed: set[int]) -> bool:
+    for i in range(data.ncon):
+        g1, g2 = data.contact.geom1[i], data.contact.geom2[i]
+        if g1 in floor or g2 in floor:
+            other = g2 if g1 in floor else g1
+            if model.geom_bodyid[other] not in allowed:
+                return True
+    return False
+
+
+def randomized_models(model: mujoco.MjModel, count: int, rng: np.random.Generator) -> list[mujoco.MjModel]:
+    """`count` copies of `model` with the training ranges of link mass (x0.9-1.2), ground friction
+    (x0.5-1.25) and PD gains (x0.85-1.15) drawn per copy: the optional randomized evaluation."""
+    out = []
+    for _ in range(count):
+        m = copy.copy(model)
+        m.body_mass[1:] *= rng.uniform(0.9, 1.2)
+        m.geom_friction[:, 0] *= rng.uniform(0.5, 1.25)
+        kp, kd = rng.uniform(0.85, 1.15, size=2)
+        m.actuator_gainprm[:, 0] *= kp
+        m.actuator_biasprm[:, 1] *= kp
+        m.actuator_biasprm[:, 2] *= kd
+        out.append(m)
+    return out

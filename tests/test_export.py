@@ -1,0 +1,153 @@
+"""Export and sim2sim: the TorchScript file acts like the training actor, the deploy loop sees what the
+training environment sees, `policy.json` is checked field by field, and the smoke DAG validates."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from conftest import RETARGETED_DIR, cli
+from rerun.chunk import RrdReader
+from tensordict import TensorDict
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.evaluation.deploy import DeployController
+from rd_pipeline.export.exporter import build_policy_spec, load_actor, script_actor
+from rd_pipeline.export.policy_spec import load_policy_spec
+from rd_pipeline.motion.contact import ContactThresholds
+from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+from rd_pipeline.rl.env import TrackingEnv
+from rd_pipeline.rl.env_config import EnvConfig
+from rd_pipeline.rl.evaluate import nominal
+from rd_pipeline.rl.ppo import PpoConfig, build_ppo
+from rd_pipeline.rl.rewards import GROUPS
+from rd_pipeline.robots import load_robot
+from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
+from rd_pipeline.sampling.segments import segment_bounds
+
+
+def _env(robot_name: str, motion: str, config: EnvConfig):
+    robot = load_robot(robot_name)
+    reference = import_retargeted_csv(RETARGETED_DIR / robot_name / f"{motion}.csv", robot, 30.0, 50.0, "cubic",
+                                      ContactThresholds()).reference.frames(0, 600)
+    starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
+    sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=0)
+    return robot, reference, TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=0)
+
+
+@pytest.mark.parametrize(("robot_name", "motion", "mode"), [("g1", "dance1_subject2", "selective"),
+                                                             ("h1_2", "dance2_subject4", "all")])
+def test_deploy_observations_equal_the_training_environment(robot_name: str, motion: str, mode: str) -> None:
+    config = nominal(EnvConfig(), 4)
+    config = dataclasses.replace(config, actions=dataclasses.replace(config.actions, mode=mode))
+    robot, reference, env = _env(robot_name, motion, config)
+    spec = build_policy_spec(robot, dataclasses.asdict(config), env.num_actions, "import", "k", (0, reference.n_frames))
+    model = env.backend.models[0]
+    deploy = DeployController(spec, model, reference, env.num_envs)
+    starts = torch.tensor([0, 37, 150, 420])
+    env.reset(torch.arange(4), frames=starts)
+    obs = env.get_observations()["policy"]
+    state = env.backend.state
+    deploy.reset(state.qpos, state.qvel, starts.numpy())
+    # Identical up to float32 rounding: the deploy loop computes in float64 and casts once.
+    assert np.allclose(deploy.current(), obs.numpy(), rtol=0, atol=1e-6)
+    generator = torch.Generator().manual_seed(0)
+    alive = np.ones(4, dtype=bool)  # an environment that ends is reset by the env and leaves the comparison
+    for _ in range(25):
+        actions = 0.5 * torch.randn(4, env.num_actions, generator=generator)
+        ctrl = deploy.targets(actions.numpy())
+        obs, _, dones, _ = env.step(actions)
+        assert np.allclose(ctrl[alive], env.target_queue[alive, 0].numpy(), rtol=0, atol=1e-6)  # same PD targets
+        alive &= ~dones.numpy()
+        state = env.backend.state
+        deployed = deploy.observe(state.qpos, state.qvel)
+        gap = np.abs(deployed - obs["policy"].numpy())[alive]
+        assert gap.size == 0 or gap.max() <= 1e-5, gap.max()
+    assert alive.sum() >= 2 and deployed.shape[1] == spec.get("observation.size")
+
+
+def test_exported_module_matches_the_training_actor(tmp_path: Path) -> None:
+    torch.manual_seed(0)
+    _, _, env = _env("g1", "dance1_subject2", nominal(EnvConfig(), 8))
+    ppo = build_ppo(env.get_observations(), env.num_envs, env.num_actions, len(GROUPS), PpoConfig())
+    recorded = []
+    with torch.inference_mode():
+        obs = env.get_observations()
+        while sum(len(o) for o in recorded) < 1000:
+            recorded.append(obs["policy"].clone())
+            obs, *_ = env.step(ppo.act(obs))
+    observations = torch.cat(recorded)[:1000]
+    ppo.actor.update_normalization(TensorDict({"policy": observations}, batch_size=[1000]))
+    torch.save({"algorithm": ppo.save()}, tmp_path / "model_1.pt")
+    actor = load_actor(tmp_path / "model_1.pt", observations.shape[1], env.num_actions, list(PpoConfig().hidden_dims))
+    scripted = script_actor(actor)
+    scripted.save(str(tmp_path / "policy.pt"))
+    loaded = torch.jit.load(str(tmp_path / "policy.pt"))
+    ppo.actor.eval()
+    with torch.inference_mode():
+        expected = ppo.actor(TensorDict({"policy": observations}, batch_size=[1000]),
+                             stochastic_output=False)
+        exported = loaded(observations)
+    assert exported.shape == (1000, 4)
+    assert (exported - expected).abs().max().item() <= 1e-5
+    assert expected.abs().max().item() > 0.01  # a real, non-trivial actor
+
+
+def test_policy_json_names_the_missing_field(tmp_path: Path) -> None:
+    robot = load_robot("g1")
+    spec = build_policy_spec(robot, dataclasses.asdict(EnvConfig()), 4, "retarget", "abc", (0, 500))
+    path = tmp_path / "policy.json"
+    spec.save(path)
+    assert load_policy_spec(path).get("action.residual_mask") == [0, 3, 6, 9]
+    data = json.loads(path.read_text())
+    del data["action"]["scale"]
+    path.write_text(json.dumps(data))
+    with pytest.raises(PipelineError, match=r"policy.json: field 'action.scale' is missing$"):
+        load_policy_spec(path)
+    data = json.loads(json.dumps(spec.data))
+    data["joints"]["kp"] = data["joints"]["kp"][:-1]
+    path.write_text(json.dumps(data))
+    with pytest.raises(PipelineError, match=r"field 'joints.kp' has 22 values, expected 23"):
+        load_policy_spec(path)
+    data = json.loads(json.dumps(spec.data))
+    data["rates"]["control_hz"] = "fifty"
+    path.write_text(json.dumps(data))
+    with pytest.raises(PipelineError, match=r"field 'rates.control_hz' must be an integer or a number, got 'fifty'"):
+        load_policy_spec(path)
+    del data["rates"]
+    path.write_text(json.dumps(data))
+    with pytest.raises(PipelineError, match=r"field 'rates' is missing"):
+        load_policy_spec(path)
+
+
+@pytest.mark.parametrize(("robot", "motion"), [("g1", "dance1_subject2"), ("h1_2", "dance2_subject4")])
+def test_smoke_profile_trains_exports_and_validates(robot: str, motion: str, artifacts: Path) -> None:
+    result = cli("run", "--robot", robot, "--motion", motion, "--profile", "smoke")
+    assert result.returncode == 0, result.stderr
+    (export,) = (artifacts / "export" / robot / motion).iterdir()
+    spec = load_policy_spec(export / "policy.json")
+    assert (export / "policy.pt").is_file() and spec.get("robot") == robot
+    (validate,) = (artifacts / "validate" / robot / motion).iterdir()
+    report = json.loads((validate / "report.json").read_text())
+    for controller in ("policy", "zero_action"):
+        grid = report["nominal"][controller]["fixed_grid"]
+        assert grid["rollouts"] == report["protocol"]["starts"] > 100
+        assert 0.2 < grid["mean_survival_s"] < 10 and grid["E_g_mpbpe"] > 0
+        assert len(report["nominal"][controller]["drift"]) == 6
+    for name in ("report.md", "drift.png", "survival_per_start.png", "sim2sim.rrd"):
+        assert (validate / name).stat().st_size > 0, name
+    assert "| zero_action |" in (validate / "report.md").read_text()
+    if robot == "g1":  # `view` puts the tracked robot beside the human and the reference once validated
+        out = artifacts.parent / "view.rrd"
+        assert cli("view", "--robot", robot, "--motion", motion, "--profile", "smoke", "--out", str(out)).returncode == 0
+        rows: dict[str, int] = {}
+        for chunk in RrdReader(str(out)).store().stream():
+            if not chunk.is_static:
+                rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+        steps = round(report["nominal"]["policy"]["start_zero"]["mean_survival_s"] * 50)
+        assert rows["/robot/tracked/pelvis"] == steps + 1 and rows["/robot/retarget/pelvis"] == 6575
+        assert rows["/human/joints"] == 3945
