@@ -43,7 +43,8 @@ def _pipeline(robot, motion, profile, source, params_file, assignments, seed=Non
 
 
 def run(cmd: Run, console: Console) -> int:
-    assignments = cmd.set + ((f"train.clip={cmd.clip}",) if cmd.clip else ())
+    assignments = cmd.set + ((f"train.clip={cmd.clip}",) if cmd.clip else ()) + (
+        (f"train.env.backend={cmd.backend}",) if cmd.backend else ())
     pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, cmd.source, cmd.params_file, assignments, cmd.seed)
     store = ArtifactStore(paths.artifacts_dir())
     console.print(f"rd-pipeline: {cmd.robot}/{cmd.motion} from {pipeline.source}, artifacts in {store.root}")

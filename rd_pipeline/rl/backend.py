@@ -14,6 +14,8 @@ from typing import Protocol
 import mujoco
 import numpy as np
 
+from rd_pipeline.errors import PipelineError
+
 
 @dataclass
 class PhysicsState:
@@ -36,11 +38,36 @@ class PhysicsState:
 
 
 class PhysicsBackend(Protocol):
+    """What the environment needs from physics; `models[i]` is environment i's (randomized) model."""
+
     num_envs: int
+    models: list[mujoco.MjModel]
+    state: PhysicsState
 
     def set_state(self, env_ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None: ...
 
     def step(self, ctrl: np.ndarray, substeps: int, joint_force: np.ndarray | None = None) -> PhysicsState: ...
+
+    def push(self, env_ids: np.ndarray, planar_velocity: np.ndarray) -> None: ...
+
+    def push(self, env_ids: np.ndarray, planar_velocity: np.ndarray) -> None:
+        """Add (k, 2) horizontal velocity to the floating base of `env_ids` (a push)."""
+        for k, i in enumerate(env_ids):
+            self.datas[i].qvel[:2] += planar_velocity[k]
+
+    def get_states(self) -> np.ndarray: ...
+
+    def set_states(self, states: np.ndarray) -> None: ...
+
+    def close(self) -> None: ...
+
+
+def body_velocities(xpos: np.ndarray, cvel: np.ndarray, root_com: np.ndarray) -> np.ndarray:
+    """(..., nbody, 6) world [angular, linear] velocity at each body origin from MuJoCo's `cvel`
+    (spatial velocity at the tree's centre of mass `root_com` = subtree_com[body_rootid]); what
+    `mj_objectVelocity` does, for all bodies at once."""
+    angular, linear = cvel[..., :3], cvel[..., 3:]
+    return np.concatenate([angular, linear - np.cross(xpos - root_com, angular)], axis=-1)
 
 
 class MujocoCpuBackend:
@@ -97,15 +124,15 @@ class MujocoCpuBackend:
         s.qpos[i], s.qvel[i] = data.qpos, data.qvel
         s.body_pos[i], s.body_quat[i] = data.xpos, data.xquat
         s.actuator_force[i] = data.actuator_force
-        # cvel is the spatial velocity at each tree's centre of mass; move it to the body origins
-        # (what mj_objectVelocity does, for all bodies at once).
-        angular, linear = data.cvel[:, :3], data.cvel[:, 3:]
-        offset = data.xpos - data.subtree_com[model.body_rootid]
-        s.body_vel[i, :, :3] = angular
-        s.body_vel[i, :, 3:] = linear - np.cross(offset, angular)
+        s.body_vel[i] = body_velocities(data.xpos, data.cvel, data.subtree_com[model.body_rootid])
         # External (contact) force on each body, world frame, from one C call instead of a loop over contacts.
         mujoco.mj_rnePostConstraint(model, data)
         s.contact_force[i] = data.cfrc_ext[:, 3:]
+
+    def push(self, env_ids: np.ndarray, planar_velocity: np.ndarray) -> None:
+        """Add (k, 2) horizontal velocity to the floating base of `env_ids` (a push)."""
+        for k, i in enumerate(env_ids):
+            self.datas[i].qvel[:2] += planar_velocity[k]
 
     def get_states(self) -> np.ndarray:
         """(N, S) full physics state of every environment (for checkpoints)."""
@@ -126,3 +153,17 @@ class MujocoCpuBackend:
     def close(self) -> None:
         if self.pool is not None:
             self.pool.shutdown()
+
+
+BACKENDS = ("cpu", "warp")
+
+
+def make_backend(name: str, models: list[mujoco.MjModel], threads: int) -> PhysicsBackend:
+    """`cpu`: C MuJoCo in `threads` threads; `warp`: MuJoCo Warp (GPU when present, else Warp's CPU device)."""
+    if name == "cpu":
+        return MujocoCpuBackend(models, threads)
+    if name == "warp":
+        from rd_pipeline.rl.warp_backend import MujocoWarpBackend
+
+        return MujocoWarpBackend(models)
+    raise PipelineError(f"train.env.backend must be one of {', '.join(BACKENDS)}, got '{name}'")

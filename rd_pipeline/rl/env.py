@@ -15,7 +15,7 @@ from tensordict import TensorDict
 
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.rl.actions import ResidualActions
-from rd_pipeline.rl.backend import MujocoCpuBackend
+from rd_pipeline.rl.backend import PhysicsBackend, make_backend
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.observations import actor_terms
 from rd_pipeline.rl.quat import projected_gravity, rotate_inverse
@@ -45,7 +45,7 @@ class TrackingEnv:
         base = simulation_model(robot, config.physics_dt)
         self.dr_params = np.zeros((self.num_envs, 9))  # mass, friction, kp, kd, com xyz, delay, rfi factor
         models = [self._randomized(base, i) for i in range(self.num_envs)]
-        self.backend = MujocoCpuBackend(models, config.threads)
+        self.backend = make_backend(config.backend, models, config.threads)
         self.qpos_idx = np.array([base.jnt_qposadr[base.joint(j).id] for j in rc.joint_names])
         self.dof_idx = np.array([base.jnt_dofadr[base.joint(j).id] for j in rc.joint_names])
 
@@ -251,8 +251,7 @@ class TrackingEnv:
         if len(due) == 0:
             return
         speed = self.config.randomization.push_max_speed
-        for i in due:
-            self.backend.datas[i].qvel[:2] += self.rng.uniform(-speed, speed, 2)
+        self.backend.push(due, self.rng.uniform(-speed, speed, (len(due), 2)))
         self.next_push = self.next_push.clone()
         self.next_push[due] = torch.as_tensor(self.episode_length_buf[due].numpy() + self._push_times(len(due)))
 

@@ -39,8 +39,10 @@ class EnvConfig:
 
     num_envs: int = 64
     """Parallel environments."""
+    backend: str = "cpu"
+    """Physics backend: `cpu` (C MuJoCo in threads) or `warp` (MuJoCo Warp, the `gpu` extra)."""
     threads: int = 2
-    """Worker threads stepping MuJoCo."""
+    """Worker threads stepping MuJoCo (cpu backend)."""
     physics_dt: float = 0.002
     """500 Hz physics."""
     decimation: int = 10
