@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import tyro
 from rich.console import Console
@@ -131,11 +131,42 @@ class Motions:
     """List the motions available here and their sources."""
 
 
+@dataclass(frozen=True)
+class Sweep:
+    """Full DAG runs over robots x motions x seeds (shared upstream computed once); a summary table at the end."""
+
+    robots: tuple[str, ...] = (DEFAULT_ROBOT,)
+    """Robots."""
+    motions: tuple[str, ...] = (DEFAULT_MOTION,)
+    """Motions."""
+    seeds: tuple[int, ...] = (0,)
+    """Training seeds."""
+    profile: str | None = "smoke"
+    """Parameter profile of every trial."""
+    executor: Literal["local", "ray"] = "local"
+    """`local`: subprocesses on this machine; `ray`: tasks on a Ray cluster (or a local Ray instance)."""
+    ray_address: str | None = None
+    """Address of a running Ray cluster (default: start a local one)."""
+    workers: int = 2
+    """Trials at a time with the local executor."""
+    set: tuple[str, ...] = ()
+    """Parameter overrides for every trial, `stage.param=value`."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Ablate(Sweep):
+    """One of the paper's ablations as a sweep: `residual` (none / all / selective) or `sampler`
+    (uniform / distribution / failure / combined), reduced to its table (markdown + JSON)."""
+
+    study: tyro.conf.Positional[Literal["residual", "sampler"]]
+    """Which study."""
+
+
 def main(argv: list[str] | None = None) -> int:
     command = tyro.extras.subcommand_cli_from_dict(
         {
             "run": Run, "stage": StageCommand, "status": Status, "view": View,
-            "fetch-lafan": FetchLafan, "robots": Robots, "motions": Motions,
+            "fetch-lafan": FetchLafan, "robots": Robots, "motions": Motions, "sweep": Sweep, "ablate": Ablate,
         },
         prog="rd-pipeline", args=argv, description="LAFAN1 mocap -> humanoid dance policies, one DAG per (robot, motion).",
     )
@@ -156,6 +187,7 @@ def _dispatch(command: object, console: Console) -> int:
     handlers = {
         Run: commands.run, StageCommand: commands.stage, Status: commands.status, View: commands.view,
         FetchLafan: commands.fetch_lafan, Robots: commands.robots, Motions: commands.motions,
+        Sweep: commands.sweep, Ablate: commands.ablate,
     }
     return handlers[type(command)](command, console)
 

@@ -18,7 +18,7 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.params import layered_params
 
 if TYPE_CHECKING:
-    from rd_pipeline.cli import FetchLafan, Motions, Robots, Run, StageCommand, Status, View
+    from rd_pipeline.cli import Ablate, FetchLafan, Motions, Robots, Run, StageCommand, Status, Sweep, View
 
 
 def _registry():
@@ -156,3 +156,65 @@ def motions(cmd: Motions, console: Console) -> int:
     for name, sources in found.items():
         print(f"{name:<18} {' '.join(sources)}")
     return 0
+
+
+SWEEP_COLUMNS = ("start_zero_survival_s", "zero_action_start_zero_survival_s", "mean_survival_s", "completion_pct",
+                 "E_g_mpbpe", "E_mpjpe")
+"""Summary-table columns, from each trial's validate manifest."""
+
+
+def validation_report(trial, profile: str | None):
+    """The `report.json` a sweep trial's run produced (found by its planned key), or None."""
+    pipeline = _pipeline(trial.robot, trial.motion, profile, None, None, trial.assignments, trial.seed)
+    planned = {e.stage.name: e for e in pipeline.plan(pipeline.chain())}
+    found = ArtifactStore(paths.artifacts_dir()).find("validate", trial.robot, trial.motion, planned["validate"].key)
+    return found.path / "report.json" if found else None
+
+
+def _run_trials(cmd: Sweep, trials, label: str, console: Console):
+    from rd_pipeline.artifacts.keys import artifact_key
+    from rd_pipeline.sweeps.runner import TrialResult, run_sweep, write_summary
+
+    if cmd.executor not in ("local", "ray"):
+        raise PipelineError(f"executor must be local or ray, got '{cmd.executor}'")
+    find_report = lambda trial: validation_report(trial, cmd.profile)  # noqa: E731
+
+    def on_result(result: TrialResult) -> None:
+        status = "[green]ok[/]" if result.ok else f"[red]failed[/] {result.error}"
+        console.print(f"trial {result.trial.label}: {status} ({result.seconds:.0f} s)")
+
+    for trial in trials:  # bad parameters fail here, before any work, with one line
+        _pipeline(trial.robot, trial.motion, cmd.profile, None, None, trial.assignments, trial.seed)
+    name = f"{label}-{artifact_key('sweep', 1, {'trials': [t.label for t in trials], 'sets': [t.assignments for t in trials], 'profile': cmd.profile}, {}, {})[:8]}"
+    console.print(f"{label}: {len(trials)} trials ({cmd.executor}), results in {paths.artifacts_dir() / 'sweeps' / name}")
+    results = run_sweep(trials, cmd.profile, cmd.executor, cmd.workers, cmd.ray_address, find_report, on_result)
+    out = paths.artifacts_dir() / "sweeps" / name
+    summary = write_summary(results, out, SWEEP_COLUMNS)
+    table = Table("trial", "status", *SWEEP_COLUMNS, title=f"{label} summary")
+    for r in results:
+        table.add_row(r.trial.label, "ok" if r.ok else "failed",
+                      *("–" if r.metrics.get(c) is None else f"{r.metrics[c]:.2f}" for c in SWEEP_COLUMNS))
+    console.print(table)
+    console.print(f"wrote {summary}")
+    return results, out
+
+
+def sweep(cmd: Sweep, console: Console) -> int:
+    from rd_pipeline.sweeps.runner import make_trials
+
+    trials = make_trials(list(cmd.robots), list(cmd.motions), list(cmd.seeds), {"default": cmd.set})
+    results, _ = _run_trials(cmd, trials, "sweep", console)
+    return 0 if all(r.ok for r in results) else 1
+
+
+def ablate(cmd: Ablate, console: Console) -> int:
+    from rd_pipeline.sweeps.ablation import STUDIES, ablation_table, write_ablation
+    from rd_pipeline.sweeps.runner import make_trials
+
+    variants = {arm: cmd.set + sets for arm, sets in STUDIES[cmd.study].items()}
+    trials = make_trials(list(cmd.robots), list(cmd.motions), list(cmd.seeds), variants)
+    results, out = _run_trials(cmd, trials, f"ablate-{cmd.study}", console)
+    path = write_ablation(cmd.study, ablation_table(cmd.study, results), results, out)
+    console.print(path.read_text(), highlight=False)
+    console.print(f"wrote {path}")
+    return 0 if all(r.ok for r in results) else 1

@@ -25,7 +25,7 @@ def test_dvc_stages_are_the_registry() -> None:
         assert f"stages.{name}" in stage["params"]
 
 
-def test_dvc_repro_parse(tmp_path: Path) -> None:
+def test_dvc_repro_runs_the_smoke_dag(tmp_path: Path) -> None:
     dvc = shutil.which("dvc", path=str(Path(sys.executable).parent)) or shutil.which("dvc")
     if dvc is None:
         pytest.skip("the dvc extra is not installed (CI installs it)")
@@ -37,11 +37,15 @@ def test_dvc_repro_parse(tmp_path: Path) -> None:
     env["PATH"] = f"{Path(sys.executable).parent}:{env['PATH']}"
     run = lambda *args: subprocess.run([dvc, *args], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
     assert run("init", "--no-scm").returncode == 0
-    result = run("repro", "parse@dance1_subject2")
+    # The smoke profile (params.yaml) through the whole DAG for G1 on dance1_subject2 (matrix item motion1).
+    result = run("repro", "validate@g1-motion1")
     assert result.returncode == 0, result.stdout + result.stderr
-    (artifact,) = (tmp_path / "artifacts" / "parse" / "dance1_subject2").iterdir()
-    assert (artifact / "manifest.json").is_file() and (artifact / "human_motion.npz").is_file()
+    for stage in ("retarget", "stats", "prior", "train", "export", "validate"):
+        (artifact,) = (tmp_path / "artifacts" / stage / "g1" / "dance1_subject2").iterdir()
+        assert (artifact / "manifest.json").is_file(), stage
+    (report,) = (tmp_path / "artifacts" / "validate" / "g1" / "dance1_subject2").glob("*/report.json")
+    assert '"zero_action"' in report.read_text()
     lock = yaml.safe_load((tmp_path / "dvc.lock").read_text())
-    assert "parse@dance1_subject2" in lock["stages"]
-    again = run("repro", "parse@dance1_subject2")
+    assert {"parse@dance1_subject2", "train@g1-motion1", "validate@g1-motion1"} <= set(lock["stages"])
+    again = run("repro", "validate@g1-motion1")
     assert again.returncode == 0 and "didn't change, skipping" in again.stdout

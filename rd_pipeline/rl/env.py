@@ -15,7 +15,7 @@ from tensordict import TensorDict
 
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.rl.actions import ResidualActions
-from rd_pipeline.rl.backend import PhysicsBackend, make_backend
+from rd_pipeline.rl.backend import make_backend
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.observations import actor_terms
 from rd_pipeline.rl.quat import projected_gravity, rotate_inverse

@@ -1,0 +1,48 @@
+"""Sweeps on a local Ray instance (a failing trial does not stop the others) and the ablation table."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from conftest import cli
+
+from rd_pipeline.commands import validation_report
+from rd_pipeline.sweeps.runner import Trial, run_sweep
+
+FAST = ("train.iterations=1", "train.clip=0:4")
+"""One PPO iteration on 4 s of motion: 4 validation starts per trial."""
+
+
+def test_ray_sweep_reports_a_failing_trial_and_finishes_the_others(artifacts: Path) -> None:
+    pytest.importorskip("ray", reason="the ray extra is not installed (CI installs it)")
+    trials = [Trial("g1", "dance1_subject2", 0, "fast", FAST), Trial("g1", "dance1_subject2", 1, "fast", FAST),
+              Trial("g1", "dance1_subject2", 0, "broken", ("train.iterations=1", "train.clip=0:0.5"))]
+    seen = []
+
+    results = run_sweep(trials, "smoke", "ray", 2, None, lambda t: validation_report(t, "smoke"), seen.append)
+    assert [r.ok for r in results] == [True, True, False]
+    assert "leaves less than one second" in results[2].error
+    assert results[0].metrics["zero_action_start_zero_survival_s"] > 0.2
+    assert results[0].metrics["E_g_mpbpe"] != results[1].metrics["E_g_mpbpe"]  # two seeds, two policies
+    # The shared upstream was computed once: one artifact per upstream stage.
+    for stage in ("parse", "retarget", "stats", "prior"):
+        folder = artifacts / stage / ("" if stage == "parse" else "g1")
+        assert len(list(folder.glob("**/manifest.json"))) == 1, stage
+    assert len(seen) == 3
+
+
+def test_ablate_residual_writes_the_paper_table(artifacts: Path) -> None:
+    result = cli("ablate", "residual", "--robots", "g1", "--motions", "dance1_subject2", "--seeds", "0",
+                 "--set", *FAST)
+    assert result.returncode == 0, result.stderr
+    (folder,) = (artifacts / "sweeps").iterdir()
+    table = json.loads((folder / "ablation.json").read_text())
+    assert list(table["table"]) == ["none", "all", "selective"] and table["failed_trials"] == []
+    for arm in table["table"].values():
+        assert arm["E_g_mpbpe"]["n"] == 1 and arm["E_g_mpbpe"]["mean"] > 0 and arm["E_g_mpbpe"]["ci95"] is None
+    markdown = (folder / "ablation.md").read_text()
+    assert "| selective |" in markdown and "E_mpjve" in markdown
+    summary = json.loads((folder / "summary.json").read_text())
+    assert sorted(row["variant"] for row in summary) == ["all", "none", "selective"]
