@@ -1,12 +1,14 @@
 """Benchmark: environment steps/s with a fixed (zero) policy against raw `mj_step` on the same cores,
 and full PPO samples/s including the update.
 
-    python bench/env_throughput.py [--robot g1] [--envs 64] [--threads 2] [--out bench/results/env_throughput.json]
+    python bench/env_throughput.py [--robot g1] [--envs 64] [--threads 2] [--backend cpu|warp]
+        [--out bench/results/env_throughput.json]
 
 Raw throughput runs `mj_step` on the environment's own simulation models (one per environment,
 domain-randomized), started from copies of the environments' states after each timed block, in the
 same number of threads; the ratio compares physics steps per second (env steps x decimation)
-measured side by side, interleaved, in one run.
+measured side by side, interleaved, in one run. With `--backend warp` the raw figure is
+`mujoco_warp.step` on the environment's own batched model and data (all worlds at once).
 """
 
 from __future__ import annotations
@@ -61,12 +63,34 @@ def raw_physics_steps_per_s(models: list[mujoco.MjModel], source: list[mujoco.Mj
     return envs * steps / (time.perf_counter() - began)
 
 
+def raw_warp_steps_per_s(backend, steps: int) -> float:
+    """`mujoco_warp.step` on the backend's batched model and data, 10 steps per launch (a CUDA graph
+    on a GPU, as the environment does), without any read-back."""
+    wp, mjw = backend.wp, backend.mjw
+    with wp.ScopedDevice(backend.device):
+        if backend.device.startswith("cuda"):
+            with wp.ScopedCapture() as capture:
+                for _ in range(10):
+                    mjw.step(backend.model, backend.data)
+            launch = lambda: wp.capture_launch(capture.graph)  # noqa: E731
+        else:
+            launch = lambda: [mjw.step(backend.model, backend.data) for _ in range(10)]  # noqa: E731
+        launch()
+        wp.synchronize()
+        began = time.perf_counter()
+        for _ in range(steps // 10):
+            launch()
+        wp.synchronize()
+    return backend.num_envs * steps / (time.perf_counter() - began)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robot", default="g1")
     parser.add_argument("--motion", default="dance1_subject2")
     parser.add_argument("--envs", type=int, default=64)
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--backend", choices=("cpu", "warp"), default="cpu")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--out", type=Path, default=Path("bench/results/env_throughput.json"))
     args = parser.parse_args()
@@ -76,7 +100,7 @@ def main() -> None:
                                       ContactThresholds()).reference
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
     sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=0)
-    config = EnvConfig(num_envs=args.envs, threads=args.threads)
+    config = EnvConfig(num_envs=args.envs, threads=args.threads, backend=args.backend)
     env = TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=0)
     zero = torch.zeros(args.envs, env.num_actions)
     env_rates, raw_rates = [], []
@@ -85,7 +109,8 @@ def main() -> None:
         for _ in range(50):
             env.step(zero)
         env_rates.append(args.envs * 50 * config.decimation / (time.perf_counter() - began))
-        raw_rates.append(raw_physics_steps_per_s(env.backend.models, env.backend.datas, args.threads, 500))
+        raw_rates.append(raw_warp_steps_per_s(env.backend, 500) if args.backend == "warp"
+                         else raw_physics_steps_per_s(env.backend.models, env.backend.datas, args.threads, 500))
     ppo = build_ppo(env.get_observations(), args.envs, env.num_actions, len(GROUPS), PpoConfig())
     obs = env.get_observations()
     began = time.perf_counter()
@@ -101,7 +126,7 @@ def main() -> None:
     ppo_rate = iterations * ppo.storage.num_transitions_per_env * args.envs / (time.perf_counter() - began)
     env_median, raw_median = statistics.median(env_rates), statistics.median(raw_rates)
     result = {
-        "robot": args.robot, "envs": args.envs, "threads": args.threads,
+        "robot": args.robot, "envs": args.envs, "threads": args.threads, "backend": args.backend,
         "env_steps_per_s": round(env_median / config.decimation, 1),
         "env_physics_steps_per_s": round(env_median, 1), "raw_mj_step_per_s": round(raw_median, 1),
         "ratio": round(env_median / raw_median, 3), "ratio_target": 0.7,

@@ -21,7 +21,10 @@ RANDOMIZED_FIELDS = ("body_mass", "geom_friction", "body_ipos", "actuator_gainpr
 class MujocoWarpBackend:
     """N worlds of one MuJoCo Warp model and data."""
 
-    def __init__(self, models: list[mujoco.MjModel], device: str | None = None) -> None:
+    def __init__(self, models: list[mujoco.MjModel], device: str | None = None, contacts_per_world: int = 48,
+                 constraints_per_world: int = 256) -> None:
+        """`contacts_per_world`/`constraints_per_world` size Warp's fixed buffers: a fallen humanoid
+        touches the floor at a few dozen points, each a 4-row pyramidal-cone constraint."""
         try:
             import mujoco_warp as mjw
             import warp as wp
@@ -40,7 +43,8 @@ class MujocoWarpBackend:
                 if not np.array_equal(values, np.broadcast_to(values[:1], values.shape)):
                     current = getattr(self.model, field)
                     setattr(self.model, field, wp.array(values.astype(np.float32), dtype=current.dtype))
-            self.data = mjw.make_data(base, nworld=self.num_envs)
+            self.data = mjw.make_data(base, nworld=self.num_envs, nconmax=contacts_per_world,
+                                      njmax=constraints_per_world)
         self.graph = None
         self.graph_substeps = 0
         n = self.num_envs
