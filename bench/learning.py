@@ -1,7 +1,7 @@
 """Benchmark: deterministic start-zero survival of trained checkpoints against the zero-action policy.
 
     python bench/learning.py --robot g1 --motion dance1_subject2 --profile cpu --clip 0:10 \
-        --checkpoints DIR [--out bench/results/learning.json]
+        --checkpoints DIR [--set stage.param=value ...] [--out bench/results/learning.json]
 
 Rebuilds the training environment (robot, reference clip and the profile's settings, resolved by
 the same pipeline as `rd-pipeline run`) on nominal physics, and rolls out from frame 0 with the
@@ -39,10 +39,11 @@ def main() -> None:
     parser.add_argument("--profile", default="cpu")
     parser.add_argument("--clip", default="0:10")
     parser.add_argument("--checkpoints", type=Path, required=True)
+    parser.add_argument("--set", nargs="*", default=[], help="overrides the run used, e.g. train.env.actions.mode=selective")
     parser.add_argument("--out", type=Path, default=Path("bench/results/learning.json"))
     args = parser.parse_args()
     registry = {stage.name: stage for stage in REGISTRY}
-    values = layered_params(args.profile, list(registry), None, (f"train.clip={args.clip}",))
+    values = layered_params(args.profile, list(registry), None, (f"train.clip={args.clip}", *args.set))
     pipeline = Pipeline(REGISTRY, args.robot, args.motion, resolve_source(args.robot, args.motion, None), values)
     planned = {entry.stage.name: entry for entry in pipeline.plan(pipeline.chain())}
     params: TrainParams = planned["train"].params

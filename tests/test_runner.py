@@ -98,6 +98,17 @@ def test_bad_parameter_is_named(artifacts: Path) -> None:
     assert not (artifacts / "import").exists()
 
 
+def test_tuple_parameters_from_set() -> None:
+    from rd_pipeline.artifacts.stage import build_params
+    from stages import REGISTRY
+
+    validate, train = (next(s for s in REGISTRY if s.name == n) for n in ("validate", "train"))
+    assert build_params(validate, {"randomized_seeds": "[0, 1, 2]"}).randomized_seeds == (0, 1, 2)
+    assert build_params(train, {"env.randomization.push_interval_s": "4,8"}).env.randomization.push_interval_s == (4.0, 8.0)
+    with pytest.raises(PipelineError, match=r"^parameter 'train.env.randomization.push_interval_s' must be a float, got 'x'$"):
+        build_params(train, {"env.randomization.push_interval_s": "4,x"})
+
+
 def test_unknown_robot_and_motion_are_one_line(artifacts: Path) -> None:
     result = cli("run", "--robot", "t800", "--motion", "dance1_subject2")
     assert result.returncode == 2 and "Traceback" not in result.stderr

@@ -134,6 +134,10 @@ def _override(defaults: Any, values: dict[str, Any], prefix: str) -> Any:
 def _coerce(name: str, value: Any, default: Any) -> Any:
     """Make `value` (possibly a string from `--set`) the type of the default, or say why not."""
     kind = type(default)
+    if isinstance(value, str) and kind is tuple:  # `--set x=1,2,3` or `x=[1,2,3]`
+        items = [item.strip() for item in value.strip().strip("[]()").split(",") if item.strip()]
+        like = default[0] if default else None
+        value = tuple(_coerce(name, item, like) if like is not None else _number_or_text(item) for item in items)
     if isinstance(value, str) and kind is not str:
         text = value.strip()
         if kind is bool:
@@ -151,3 +155,12 @@ def _coerce(name: str, value: Any, default: Any) -> Any:
     if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
         raise PipelineError(f"parameter '{name}' must be a {kind.__name__}, got {value!r}")
     return value
+
+
+def _number_or_text(text: str) -> int | float | str:
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
