@@ -32,7 +32,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.evaluation.metrics import drift, summarize, t_interval
     from rd_pipeline.evaluation.report import CONTROLLERS, plot_report, write_json, write_markdown
     from rd_pipeline.evaluation.sim2sim import BodySets, randomized_models, run_rollouts
-    from rd_pipeline.export.policy_spec import POLICY_FILE, SPEC_FILE, load_policy_spec
+    from rd_pipeline.export.policy_spec import POLICY_FILE, SPEC_FILE, PolicySpec, load_policy_spec
     from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
     from rd_pipeline.rl.sim_model import pd_simulation_model
     from rd_pipeline.robots import load_robot
@@ -57,8 +57,18 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         with torch.inference_mode():
             return scripted(torch.from_numpy(obs)).numpy().astype(np.float64)
 
-    outputs = len(spec.get("action.outputs"))
-    controllers = {"policy": policy, "zero_action": lambda obs: np.zeros((len(obs), outputs))}
+    # The baseline is the reference fed straight to PD whatever the policy's action mode (with
+    # `none`, a zero action would mean the default pose): zero residuals on every policy joint.
+    policy_joints = spec.get("joints.policy")
+    observation = spec.get("observation")
+    terms = [{**t, "size": len(policy_joints)} if t["name"] == "last_action" else t for t in observation["terms"]]
+    frame = sum(t["size"] for t in terms)
+    baseline_spec = PolicySpec({
+        **spec.data, "action": {**spec.get("action"), "mode": "all", "outputs": policy_joints},
+        "observation": {**observation, "terms": terms, "frame_size": frame, "size": frame * observation["history"]},
+    })
+    specs = {"policy": spec, "zero_action": baseline_spec}
+    controllers = {"policy": policy, "zero_action": lambda obs: np.zeros((len(obs), len(policy_joints)))}
     config = load_robot(ctx.robot).config
     bodies = BodySets(config.root_body, config.tracking_bodies, config.termination_bodies, config.foot_bodies)
     control_hz = spec.get("rates.control_hz")
@@ -68,7 +78,8 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     nominal, per_start, first = {}, {}, {}
     with ctx.progress(len(CONTROLLERS) * (1 + len(p.randomized_seeds)), "sim2sim rollouts") as advance:
         for name in CONTROLLERS:
-            rollouts = run_rollouts(spec, [model] * len(starts), reference, controllers[name], starts, bodies, p.protocol)
+            rollouts = run_rollouts(specs[name], [model] * len(starts), reference, controllers[name], starts, bodies,
+                                    p.protocol)
             nominal[name] = {"fixed_grid": summarize(rollouts, control_hz), "start_zero": summarize(rollouts[:1], control_hz),
                              "drift": drift(rollouts, rng)}
             per_start[name] = [(r.start_frame / control_hz, r.steps / control_hz) for r in rollouts]
@@ -80,7 +91,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
             for seed in p.randomized_seeds:
                 models = randomized_models(model, len(starts), np.random.default_rng(seed))
                 for name in CONTROLLERS:
-                    rollouts = run_rollouts(spec, models, reference, controllers[name], starts, bodies, p.protocol)
+                    rollouts = run_rollouts(specs[name], models, reference, controllers[name], starts, bodies, p.protocol)
                     per_seed[name].append(summarize(rollouts, control_hz))
                     advance(f"{name} seed {seed}")
             randomized = {"seeds": list(p.randomized_seeds), **{
@@ -115,7 +126,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="validate",
-    version=1,
+    version=2,
     description="exported policy + reference -> sim2sim report (report.json/md, plots, .rrd) beside zero-action",
     params=ValidateParams,
     provides="validation_report",

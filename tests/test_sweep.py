@@ -46,3 +46,5 @@ def test_ablate_residual_writes_the_paper_table(artifacts: Path) -> None:
     assert "| selective |" in markdown and "E_mpjve" in markdown
     summary = json.loads((folder / "summary.json").read_text())
     assert sorted(row["variant"] for row in summary) == ["all", "none", "selective"]
+    # The baseline is the reference fed to PD in every arm, `none` (absolute actions) included.
+    assert len({row["zero_action_start_zero_survival_s"] for row in summary}) == 1
