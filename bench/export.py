@@ -41,7 +41,8 @@ def main() -> None:
     result = {
         "robot": spec.get("robot"), "observation_size": spec.get("observation.size"),
         "actions": len(spec.get("action.outputs")), "threads": 1, "calls": len(times),
-        "median_ms": round(1000 * statistics.median(times), 4), "p99_ms": round(1000 * times[int(0.99 * len(times))], 4),
+        "median_ms": round(1000 * statistics.median(times), 4),
+        "p99_ms": round(1000 * times[int(0.99 * len(times))], 4),
         "bar_ms": 1.0,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)

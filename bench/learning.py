@@ -39,7 +39,8 @@ def main() -> None:
     parser.add_argument("--profile", default="cpu")
     parser.add_argument("--clip", default="0:10")
     parser.add_argument("--checkpoints", type=Path, required=True)
-    parser.add_argument("--set", nargs="*", default=[], help="overrides the run used, e.g. train.env.actions.mode=selective")
+    parser.add_argument("--set", nargs="*", default=[],
+                        help="overrides the run used, e.g. train.env.actions.mode=selective")
     parser.add_argument("--out", type=Path, default=Path("bench/results/learning.json"))
     args = parser.parse_args()
     registry = {stage.name: stage for stage in REGISTRY}
