@@ -31,6 +31,7 @@ def test_dvc_repro_runs_the_smoke_dag(tmp_path: Path) -> None:
         pytest.skip("the dvc extra is not installed (CI installs it)")
     for name in ("dvc.yaml", "params.yaml"):
         shutil.copy(PROJECT / name, tmp_path / name)
+    (tmp_path / "robots").symlink_to(PROJECT / "robots")  # dvc.yaml lists the robot configs as dependencies
     (tmp_path / "raw_lafan").mkdir()
     (tmp_path / "raw_lafan" / "dance1_subject2.bvh").symlink_to(LAFAN_DIR / "dance1_subject2.bvh")
     env = {k: v for k, v in os.environ.items() if k not in ("RD_LAFAN_DIR", "RD_ARTIFACTS")}
