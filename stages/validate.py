@@ -29,10 +29,11 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     import numpy as np
     import torch
 
+    from rd_pipeline.evaluation.deploy import reference_baseline_spec
     from rd_pipeline.evaluation.metrics import drift, summarize, t_interval
     from rd_pipeline.evaluation.report import CONTROLLERS, plot_report, write_json, write_markdown
     from rd_pipeline.evaluation.sim2sim import BodySets, randomized_models, run_rollouts
-    from rd_pipeline.export.policy_spec import POLICY_FILE, SPEC_FILE, PolicySpec, load_policy_spec
+    from rd_pipeline.export.policy_spec import POLICY_FILE, SPEC_FILE, load_policy_spec
     from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
     from rd_pipeline.rl.sim_model import pd_simulation_model
     from rd_pipeline.robots import load_robot
@@ -51,24 +52,15 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     model = pd_simulation_model(asset_path(spec.get("mjcf")), joints["actuated"], np.array(joints["kp"]),
                                 np.array(joints["kd"]), np.array(joints["effort_limit"]), 1.0 / spec.get("rates.physics_hz"))
     scripted = torch.jit.load(str(exported.path / POLICY_FILE))
-    torch.set_num_threads(1)  # batch-1-per-rollout inference; the physics threads want the cores
+    torch.set_num_threads(1)  # a small MLP on a few hundred rows; the physics threads want the cores
 
     def policy(obs: np.ndarray) -> np.ndarray:
         with torch.inference_mode():
             return scripted(torch.from_numpy(obs)).numpy().astype(np.float64)
 
-    # The baseline is the reference fed straight to PD whatever the policy's action mode (with
-    # `none`, a zero action would mean the default pose): zero residuals on every policy joint.
-    policy_joints = spec.get("joints.policy")
-    observation = spec.get("observation")
-    terms = [{**t, "size": len(policy_joints)} if t["name"] == "last_action" else t for t in observation["terms"]]
-    frame = sum(t["size"] for t in terms)
-    baseline_spec = PolicySpec({
-        **spec.data, "action": {**spec.get("action"), "mode": "all", "outputs": policy_joints},
-        "observation": {**observation, "terms": terms, "frame_size": frame, "size": frame * observation["history"]},
-    })
-    specs = {"policy": spec, "zero_action": baseline_spec}
-    controllers = {"policy": policy, "zero_action": lambda obs: np.zeros((len(obs), len(policy_joints)))}
+    specs = {"policy": spec, "zero_action": reference_baseline_spec(spec)}
+    joints = len(spec.get("joints.policy"))
+    controllers = {"policy": policy, "zero_action": lambda obs: np.zeros((len(obs), joints))}
     config = load_robot(ctx.robot).config
     bodies = BodySets(config.root_body, config.tracking_bodies, config.termination_bodies, config.foot_bodies)
     control_hz = spec.get("rates.control_hz")

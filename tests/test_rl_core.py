@@ -5,11 +5,13 @@ from __future__ import annotations
 import math
 
 import mujoco
+import numpy as np
 import pytest
 import torch
 
 from rd_pipeline.rl.actions import ActionConfig, ResidualActions
 from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
+from rd_pipeline.rl.backend import MujocoCpuBackend
 from rd_pipeline.rl.rewards import GROUPS, AdaptiveSigma, RewardIndices, RewardLimits, TrackingState, compute_rewards
 from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
@@ -162,3 +164,14 @@ def test_pd_torque_is_clipped_inside_the_physics_loop() -> None:
     assert data.actuator_force[knee] == pytest.approx(robot.config.effort_limit[knee])
     elbow = robot.config.joint_names.index("left_elbow_joint")
     assert data.actuator_force[elbow] == pytest.approx(40.0 * 0.3)  # below its limit: plain kp x error (from q = 0)
+
+
+def test_a_push_changes_only_the_pushed_base_velocity() -> None:
+    model = simulation_model(load_robot("g1"))
+    backend = MujocoCpuBackend([model, model], threads=1)
+    qpos = np.tile(model.qpos0, (2, 1))
+    qpos[:, 2] = 1.0
+    backend.set_state(np.arange(2), qpos, np.zeros((2, model.nv)))
+    backend.push(np.array([1]), np.array([[0.3, -0.2]]))
+    assert backend.datas[1].qvel[:3].tolist() == pytest.approx([0.3, -0.2, 0.0])
+    assert not backend.datas[0].qvel.any()

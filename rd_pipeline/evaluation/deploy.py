@@ -29,6 +29,20 @@ def projected_gravity(quat_wxyz: np.ndarray) -> np.ndarray:
     return -np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1)
 
 
+def reference_baseline_spec(spec: PolicySpec) -> PolicySpec:
+    """The zero-action baseline's spec: the reference fed straight to PD whatever the policy's
+    action mode (with `none`, a zero action would mean the default pose), i.e. zero residuals on
+    every policy joint, with the observation layout resized to match."""
+    joints = spec.get("joints.policy")
+    observation = spec.get("observation")
+    terms = [{**t, "size": len(joints)} if t["name"] == "last_action" else t for t in observation["terms"]]
+    frame = sum(t["size"] for t in terms)
+    return PolicySpec({
+        **spec.data, "action": {**spec.get("action"), "mode": "all", "outputs": joints},
+        "observation": {**observation, "terms": terms, "frame_size": frame, "size": frame * observation["history"]},
+    })
+
+
 class DeployController:
     """Observation and action side of the loop for R rollouts at once."""
 

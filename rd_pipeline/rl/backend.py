@@ -50,11 +50,6 @@ class PhysicsBackend(Protocol):
 
     def push(self, env_ids: np.ndarray, planar_velocity: np.ndarray) -> None: ...
 
-    def push(self, env_ids: np.ndarray, planar_velocity: np.ndarray) -> None:
-        """Add (k, 2) horizontal velocity to the floating base of `env_ids` (a push)."""
-        for k, i in enumerate(env_ids):
-            self.datas[i].qvel[:2] += planar_velocity[k]
-
     def get_states(self) -> np.ndarray: ...
 
     def set_states(self, states: np.ndarray) -> None: ...
