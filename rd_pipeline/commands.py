@@ -185,7 +185,9 @@ def _run_trials(cmd: Sweep, trials, label: str, console: Console):
 
     for trial in trials:  # bad parameters fail here, before any work, with one line
         _pipeline(trial.robot, trial.motion, cmd.profile, None, None, trial.assignments, trial.seed)
-    name = f"{label}-{artifact_key('sweep', 1, {'trials': [t.label for t in trials], 'sets': [t.assignments for t in trials], 'profile': cmd.profile}, {}, {})[:8]}"
+    # The same trials and profile always land in the same folder.
+    described = {"trials": [t.label for t in trials], "sets": [t.assignments for t in trials], "profile": cmd.profile}
+    name = f"{label}-{artifact_key('sweep', 1, described, {}, {})[:8]}"
     console.print(f"{label}: {len(trials)} trials ({cmd.executor}), results in {paths.artifacts_dir() / 'sweeps' / name}")
     results = run_sweep(trials, cmd.profile, cmd.executor, cmd.workers, cmd.ray_address, find_report, on_result)
     out = paths.artifacts_dir() / "sweeps" / name

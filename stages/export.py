@@ -48,7 +48,8 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     load_policy_spec(ctx.out_dir / SPEC_FILE)  # what we wrote must pass the deploy-side check
     probe = torch.zeros(1, metrics["observation_size"])
     with torch.inference_mode():
-        gap = float((scripted(probe) - actor(TensorDict({"policy": probe}, batch_size=[1]), stochastic_output=False)).abs().max())
+        expected = actor(TensorDict({"policy": probe}, batch_size=[1]), stochastic_output=False)
+        gap = float((scripted(probe) - expected).abs().max())
     return {"checkpoint_iteration": iteration, "observation_size": metrics["observation_size"],
             "num_actions": metrics["num_actions"], "action_mode": spec.get("action.mode"),
             "reference_key": spec.get("reference.key"), "max_abs_diff_on_zero_observation": gap}
