@@ -72,9 +72,9 @@ def raw_warp_steps_per_s(backend, steps: int) -> float:
             with wp.ScopedCapture() as capture:
                 for _ in range(10):
                     mjw.step(backend.model, backend.data)
-            launch = lambda: wp.capture_launch(capture.graph)  # noqa: E731
+            launch = lambda: wp.capture_launch(capture.graph)
         else:
-            launch = lambda: [mjw.step(backend.model, backend.data) for _ in range(10)]  # noqa: E731
+            launch = lambda: [mjw.step(backend.model, backend.data) for _ in range(10)]
         launch()
         wp.synchronize()
         began = time.perf_counter()

@@ -177,7 +177,7 @@ def _run_trials(cmd: Sweep, trials, label: str, console: Console):
 
     if cmd.executor not in ("local", "ray"):
         raise PipelineError(f"executor must be local or ray, got '{cmd.executor}'")
-    find_report = lambda trial: validation_report(trial, cmd.profile)  # noqa: E731
+    find_report = lambda trial: validation_report(trial, cmd.profile)
 
     def on_result(result: TrialResult) -> None:
         status = "[green]ok[/]" if result.ok else f"[red]failed[/] {result.error}"

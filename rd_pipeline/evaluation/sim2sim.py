@@ -8,7 +8,6 @@ from its reference, or a body other than the feet touching the floor.
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 
 import mujoco
@@ -17,6 +16,8 @@ import numpy as np
 from rd_pipeline.evaluation.deploy import DeployController, ParallelPhysics, Policy, projected_gravity
 from rd_pipeline.export.policy_spec import PolicySpec
 from rd_pipeline.motion.reference import ReferenceMotion
+from rd_pipeline.rl.env_config import Randomization
+from rd_pipeline.rl.sim_model import randomized_copy
 
 
 @dataclass(frozen=True)
@@ -68,8 +69,8 @@ def run_rollouts(spec: PolicySpec, models: list[mujoco.MjModel], reference: Refe
     model = models[0]
     physics = ParallelPhysics(models, protocol.threads)
     controller = DeployController(spec, model, reference, count)
-    body_id = lambda names: np.array([model.body(n).id for n in names])  # noqa: E731
-    ref_body = lambda names: np.array([reference.body_names.index(n) for n in names])  # noqa: E731
+    body_id = lambda names: np.array([model.body(n).id for n in names])
+    ref_body = lambda names: np.array([reference.body_names.index(n) for n in names])
     tracked, tracked_ref = body_id(bodies.tracked), ref_body(bodies.tracked)
     term, term_ref = body_id(bodies.termination), ref_body(bodies.termination)
     root, root_ref = model.body(bodies.root).id, reference.body_names.index(bodies.root)
@@ -158,17 +159,13 @@ def _bad_contact(model: mujoco.MjModel, data: mujoco.MjData, floor: list[int], a
     return False
 
 
-def randomized_models(model: mujoco.MjModel, count: int, rng: np.random.Generator) -> list[mujoco.MjModel]:
-    """`count` copies of `model` with the training ranges of link mass (x0.9-1.2), ground friction
-    (x0.5-1.25) and PD gains (x0.85-1.15) drawn per copy: the optional randomized evaluation."""
+def randomized_models(model: mujoco.MjModel, count: int, rng: np.random.Generator,
+                      ranges: Randomization = Randomization()) -> list[mujoco.MjModel]:
+    """`count` copies of `model` with the training ranges of link mass, ground friction and PD gains
+    drawn per copy: the optional randomized evaluation."""
     out = []
     for _ in range(count):
-        m = copy.copy(model)
-        m.body_mass[1:] *= rng.uniform(0.9, 1.2)
-        m.geom_friction[:, 0] *= rng.uniform(0.5, 1.25)
-        kp, kd = rng.uniform(0.85, 1.15, size=2)
-        m.actuator_gainprm[:, 0] *= kp
-        m.actuator_biasprm[:, 1] *= kp
-        m.actuator_biasprm[:, 2] *= kd
-        out.append(m)
+        mass, friction = rng.uniform(*ranges.mass_factor), rng.uniform(*ranges.friction_factor)
+        kp, kd = rng.uniform(*ranges.pd_factor, size=2)
+        out.append(randomized_copy(model, mass, friction, kp, kd))
     return out

@@ -44,7 +44,7 @@ def build_policy_spec(robot: Robot, env: dict, num_actions: int, reference_stage
     if len(outputs) != num_actions:
         raise ValueError(f"the checkpoint's actor has {num_actions} outputs, the action mode implies {len(outputs)}")
     terms = actor_terms(len(policy), num_actions)
-    floats = lambda values: [float(v) for v in values]  # noqa: E731
+    floats = lambda values: [float(v) for v in values]
     return PolicySpec({
         "format_version": FORMAT_VERSION, "robot": config.name, "mjcf": config.mjcf,
         "joints": {

@@ -20,7 +20,7 @@ from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.observations import actor_terms
 from rd_pipeline.rl.quat import projected_gravity, rotate_inverse
 from rd_pipeline.rl.rewards import AdaptiveSigma, RewardIndices, RewardLimits, TrackingState, compute_rewards
-from rd_pipeline.rl.sim_model import simulation_model
+from rd_pipeline.rl.sim_model import randomized_copy, simulation_model
 from rd_pipeline.robots import Robot
 from rd_pipeline.sampling.sampler import SegmentSampler
 
@@ -34,7 +34,6 @@ class TrackingEnv:
                  segment_starts: np.ndarray, segment_lengths: np.ndarray, config: EnvConfig, seed: int) -> None:
         self.robot, self.config, self.sampler = robot, config, sampler
         self.num_envs, self.device = config.num_envs, "cpu"
-        self.cfg = config
         self.rng = np.random.default_rng(seed)
         self.segment_starts, self.segment_lengths = segment_starts, segment_lengths
         rc = robot.config
@@ -94,7 +93,6 @@ class TrackingEnv:
         self.action_history = torch.zeros(n, 3, a, dtype=DTYPE)
         self.delay = torch.as_tensor(self.dr_params[:, 7], dtype=torch.long)
         self.target_queue = torch.zeros(n, config.randomization.max_delay_steps + 1, len(rc.joint_names), dtype=DTYPE)
-        self.last_joint_vel = torch.zeros(n, len(rc.policy_joints), dtype=DTYPE)
         self.feet_air_time = torch.zeros(n, 2, dtype=DTYPE)
         self.next_push = torch.as_tensor(self._push_times(n))
         self.motion_far = config.motion_far_init_m
@@ -106,23 +104,15 @@ class TrackingEnv:
     # -- setup -------------------------------------------------------------------------------
     def _randomized(self, base, i: int):
         r = self.config.randomization
-        model = copy.copy(base)
         if not r.enabled:
             self.dr_params[i] = [1, 1, 1, 1, 0, 0, 0, 0, 1]
-            return model
+            return copy.copy(base)
         u = self.rng.uniform
         mass, friction, kp, kd = u(*r.mass_factor), u(*r.friction_factor), u(*r.pd_factor), u(*r.pd_factor)
         com = u(-r.com_offset_m, r.com_offset_m, size=3)
         delay, rfi = self.rng.integers(0, r.max_delay_steps + 1), u(*r.torque_rfi_factor)
-        model.body_mass[1:] *= mass
-        model.geom_friction[:, 0] *= friction
-        root = model.body(self.robot.config.root_body).id
-        model.body_ipos[root] += com
-        model.actuator_gainprm[:, 0] *= kp
-        model.actuator_biasprm[:, 1] *= kp
-        model.actuator_biasprm[:, 2] *= kd
         self.dr_params[i] = [mass, friction, kp, kd, *com, delay, rfi]
-        return model
+        return randomized_copy(base, mass, friction, kp, kd, base.body(self.robot.config.root_body).id, com)
 
     def _push_times(self, count: int) -> np.ndarray:
         lo, hi = self.config.randomization.push_interval_s
@@ -160,7 +150,6 @@ class TrackingEnv:
         self.action_history[env_ids] = 0.0
         self.feet_air_time[env_ids] = 0.0
         self.target_queue[env_ids] = torch.as_tensor(qpos[:, self.qpos_idx], dtype=DTYPE)[:, None]
-        self.last_joint_vel[env_ids] = torch.as_tensor(qvel[:, self.dof_idx], dtype=DTYPE)[:, self.policy_idx]
         if self.obs_frames is not None:
             self.obs_frames[env_ids] = self._actor_frame()[env_ids, None]
 
@@ -177,8 +166,9 @@ class TrackingEnv:
             "base_lin_vel": rotate_inverse(quat, t(s.qvel[:, :3])),
         }
 
-    def _actor_frame(self) -> torch.Tensor:
-        st = self._state()
+    def _actor_frame(self, st: dict[str, torch.Tensor] | None = None) -> torch.Tensor:
+        """One actor frame from `st` (the current `_state()`, computed here when not given)."""
+        st = self._state() if st is None else st
         next_frame = (self.frame + 1).clamp(max=self.max_episode_length - 1)
         values = {
             "joint_pos": st["joint_pos"] - self.default_pos[self.policy_idx], "joint_vel": st["joint_vel"],
@@ -224,7 +214,8 @@ class TrackingEnv:
         self.action_history = torch.roll(self.action_history, 1, dims=1)
         self.action_history[:, 0] = actions
 
-        state = self._tracking_state(actions, before_vel)
+        current = self._state()
+        state = self._tracking_state(current, actions, before_vel)
         terminated = self._failed(state)
         state.terminated = terminated
         rewards, terms, errors = compute_rewards(state, self.indices, self.limits, self.penalty_scale, self.sigma.sigma())
@@ -241,7 +232,7 @@ class TrackingEnv:
         extras = {"time_outs": time_out & ~terminated, "log": {f"reward/{k}": v.mean().item() for k, v in terms.items()},
                   "episode_length": self.episode_length_buf[done_ids].float()}
         self._update_curricula(self.episode_length_buf[done_ids])
-        frame = self._actor_frame()
+        frame = self._actor_frame(current)
         self.obs_frames = torch.cat([self.obs_frames[:, 1:], frame[:, None]], dim=1)
         self.reset(done_ids)
         return self.get_observations(), rewards, dones, extras
@@ -255,8 +246,9 @@ class TrackingEnv:
         self.next_push = self.next_push.clone()
         self.next_push[due] = torch.as_tensor(self.episode_length_buf[due].numpy() + self._push_times(len(due)))
 
-    def _tracking_state(self, actions: torch.Tensor, before_vel: torch.Tensor) -> TrackingState:
-        s, st = self.backend.state, self._state()
+    def _tracking_state(self, st: dict[str, torch.Tensor], actions: torch.Tensor,
+                        before_vel: torch.Tensor) -> TrackingState:
+        s = self.backend.state
         t = lambda x: torch.as_tensor(x, dtype=DTYPE)
         f = self.frame
         force = t(s.contact_force[:, self.feet_sim])
@@ -306,7 +298,7 @@ class TrackingEnv:
         return {
             "physics": self.backend.get_states(), "frame": self.frame.clone(), "start_segment": self.start_segment.clone(),
             "episode_length": self.episode_length_buf.clone(), "action_history": self.action_history.clone(),
-            "target_queue": self.target_queue.clone(), "last_joint_vel": self.last_joint_vel.clone(),
+            "target_queue": self.target_queue.clone(),
             "next_push": self.next_push.clone(), "obs_frames": self.obs_frames.clone(), "motion_far": self.motion_far,
             "penalty_scale": self.penalty_scale, "rng": self.rng.bit_generator.state,
             "feet_air_time": self.feet_air_time.clone(), "sigma_variance": dict(self.sigma.variance),
@@ -316,7 +308,7 @@ class TrackingEnv:
         self.backend.set_states(state["physics"])
         self.frame, self.start_segment = state["frame"].clone(), state["start_segment"].clone()
         self.episode_length_buf, self.action_history = state["episode_length"].clone(), state["action_history"].clone()
-        self.target_queue, self.last_joint_vel = state["target_queue"].clone(), state["last_joint_vel"].clone()
+        self.target_queue = state["target_queue"].clone()
         self.next_push, self.obs_frames = state["next_push"].clone(), state["obs_frames"].clone()
         self.motion_far, self.penalty_scale = state["motion_far"], state["penalty_scale"]
         self.feet_air_time, self.sigma.variance = state["feet_air_time"].clone(), dict(state["sigma_variance"])

@@ -8,6 +8,7 @@ config, a deploy loop from `policy.json` alone.
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -44,3 +45,22 @@ def simulation_model(robot: Robot, timestep: float = 0.002) -> mujoco.MjModel:
     config = robot.config
     return pd_simulation_model(asset_path(config.mjcf), config.joint_names, config.kp, config.kd,
                                config.effort_limit, timestep)
+
+
+RANDOMIZED_FIELDS = ("body_mass", "geom_friction", "body_ipos", "actuator_gainprm", "actuator_biasprm")
+"""Model fields `randomized_copy` changes (per-world arrays in batched backends)."""
+
+
+def randomized_copy(model: mujoco.MjModel, mass: float, friction: float, kp: float, kd: float,
+                    com_body: int | None = None, com_offset: np.ndarray | None = None) -> mujoco.MjModel:
+    """A copy of `model` with link masses, ground friction and PD gains scaled by the given factors
+    and, optionally, body `com_body`'s centre of mass moved by `com_offset` (domain randomization)."""
+    out = copy.copy(model)
+    out.body_mass[1:] *= mass
+    out.geom_friction[:, 0] *= friction
+    if com_body is not None:
+        out.body_ipos[com_body] += com_offset
+    out.actuator_gainprm[:, 0] *= kp
+    out.actuator_biasprm[:, 1] *= kp
+    out.actuator_biasprm[:, 2] *= kd
+    return out

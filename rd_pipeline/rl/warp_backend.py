@@ -13,9 +13,7 @@ import numpy as np
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.rl.backend import PhysicsState, body_velocities
-
-RANDOMIZED_FIELDS = ("body_mass", "geom_friction", "body_ipos", "actuator_gainprm", "actuator_biasprm")
-"""Model fields the environment's domain randomization changes per environment."""
+from rd_pipeline.rl.sim_model import RANDOMIZED_FIELDS
 
 
 class MujocoWarpBackend:
