@@ -28,6 +28,8 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.motion.human import HUMAN_MOTION_FILE, LAFAN_TO_Z_UP, human_motion_from_bvh
 
     clip = read_bvh(ctx.inputs["bvh"])
+    for warning in clip.warnings:
+        ctx.console.print(f"[yellow]warning:[/] {warning}", highlight=False, soft_wrap=True)
     human = human_motion_from_bvh(clip, ctx.params.length_unit_m, LAFAN_TO_Z_UP)
     human.save(ctx.out_dir / HUMAN_MOTION_FILE)
     return {
@@ -35,6 +37,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         "fps": round(human.fps, 6),
         "duration_s": round(human.duration_s, 4),
         "joints": len(human.names),
+        "warnings": list(clip.warnings),
         "height_range_m": [round(float(human.pos_w[..., 2].min()), 4), round(float(human.pos_w[..., 2].max()), 4)],
     }
 

@@ -134,6 +134,34 @@ BAD_INPUTS = {
 }
 
 
+def test_header_one_frame_over_whole_lines_is_read_with_a_warning(tmp_path: Path) -> None:
+    """fallAndGetUp1_subject1 as distributed: `Frames: 5047` over 5046 whole motion lines."""
+    path = LAFAN_DIR / "fallAndGetUp1_subject1.bvh"
+    clip = read_bvh(path)
+    assert clip.channels.shape == (5046, 69)
+    assert clip.warnings == (f"{path}: Frames says 5047 but the file has 5046 whole motion lines; read 5046",)
+    result = cli("run", "--robot", "g1", "--motion", "fallAndGetUp1_subject1", "--until", "parse",
+                 env={"RD_ARTIFACTS": str(tmp_path / "store")})
+    assert result.returncode == 0, result.stderr
+    warnings = [line for line in result.stderr.splitlines() if line.startswith("warning:")]
+    assert warnings == [f"warning: {path}: Frames says 5047 but the file has 5046 whole motion lines; read 5046"]
+
+
+def test_header_one_frame_over_a_cut_line_stays_an_error(dance: Path, tmp_path: Path) -> None:
+    lines = _lines(dance)
+    lines[132] = "Frames: 3946"
+    lines[-1] = " ".join(lines[-1].split()[:40])
+    path = tmp_path / "dance1_subject2.bvh"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(PipelineError) as error:
+        read_bvh(path)
+    assert str(error.value) == f"{path}:{len(lines)}: expected 69 values on a motion line, got 40"
+
+
+def test_dance_reads_without_warnings(dance: Path) -> None:
+    assert read_bvh(dance).warnings == ()
+
+
 @pytest.mark.parametrize("case", sorted(BAD_INPUTS))
 def test_bad_input_names_file_and_line(case: str, dance: Path, tmp_path: Path) -> None:
     change, line, message = BAD_INPUTS[case]

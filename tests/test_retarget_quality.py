@@ -11,16 +11,20 @@ import pytest
 from conftest import RETARGETED_DIR
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.evaluation.retarget_quality import FootMeshes, QualityThresholds, retarget_quality
+from rd_pipeline.evaluation.retarget_quality import FootMeshes, QualityThresholds, quality_series, retarget_quality
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.robots import Robot, load_robot
+from rd_pipeline.robots.hulls import BodyHulls
+from rd_pipeline.robots.model import collision_geoms
 
 KEYS = {
-    "frames", "fps_frames_per_s", "penetration_max_mm", "penetration_p95_mm", "skate_stance_mean_mm_s",
+    "frames", "fps_frames_per_s", "penetration_max_mm", "penetration_p95_mm", "penetration_deepest_body",
+    "feet_penetration_max_mm", "feet_penetration_p95_mm", "pelvis_height_dev_p95_m", "skate_stance_mean_mm_s",
     "joint_limit_violations", "velocity_limit_violations", "self_collision_frames", "jerk_mean",
-    "keypoint_error_mean_mm",
+    "keypoint_error_mean_mm", "keypoint_error_p95_mm", "keypoint_error_max_mm", "diverged_frames",
+    "root_speed_p999_m_s", "human_root_speed_p999_m_s",
 }
 
 # G1 left arm swung in across the chest: the elbow sinks into the torso (found by a grid search over the
@@ -60,8 +64,11 @@ def test_dataset_feet_sink_and_skate(g1_dance) -> None:
     json.dumps(quality)  # plain Python numbers only
     assert quality["frames"] == reference.n_frames == 6575
     assert quality["fps_frames_per_s"] is None and quality["keypoint_error_mean_mm"] is None
+    assert quality["feet_penetration_max_mm"] > 20.0
+    assert 0.0 < quality["feet_penetration_p95_mm"] <= quality["feet_penetration_max_mm"]
+    # Whole-body penetration is never less than the feet's (the G1 feet collide through sole spheres,
+    # the feet-only figure uses the visual mesh a viewer sees).
     assert quality["penetration_max_mm"] > 20.0
-    assert 0.0 < quality["penetration_p95_mm"] <= quality["penetration_max_mm"]
     assert quality["skate_stance_mean_mm_s"] > 100.0
 
 
@@ -79,7 +86,7 @@ def test_penetration_matches_full_mesh_in_mujoco(g1, g1_dance) -> None:
     mesh = model.geom_dataid[geom]
     vertices = model.mesh_vert[model.mesh_vertadr[mesh]:model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]]
     world_z = (vertices @ data.geom_xmat[geom].reshape(3, 3).T + data.geom_xpos[geom])[:, 2]
-    assert quality["penetration_max_mm"] == pytest.approx(-1000.0 * world_z.min(), abs=1e-3)
+    assert quality["feet_penetration_max_mm"] == pytest.approx(-1000.0 * world_z.min(), abs=1e-3)
 
 
 def test_lifted_clip_neither_penetrates_nor_stands(g1, g1_dance) -> None:
@@ -169,3 +176,88 @@ def test_keypoint_error(g1) -> None:
         retarget_quality(g1, reference, keypoint_targets=exact[:, :2], keypoint_bodies=bodies)
     with pytest.raises(PipelineError, match="not among"):
         retarget_quality(g1, reference, keypoint_targets=exact, keypoint_bodies=["left_elbow_link", "nose", "pelvis"])
+
+
+def _exact_lowest_z(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> float:
+    """Lowest world z of one posed geom, from its full mesh or its analytic shape."""
+    rotation = data.geom_xmat[geom].reshape(3, 3)
+    centre = data.geom_xpos[geom]
+    size = model.geom_size[geom]
+    kind = model.geom_type[geom]
+    if kind == mujoco.mjtGeom.mjGEOM_MESH:
+        mesh = model.geom_dataid[geom]
+        vertices = model.mesh_vert[model.mesh_vertadr[mesh]:model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]]
+        return float((vertices @ rotation.T + centre)[:, 2].min())
+    axis_z = rotation[2, 2]
+    if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+        return float(centre[2] - size[0])
+    if kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
+        return float(centre[2] - size[1] * abs(axis_z) - size[0])
+    assert kind == mujoco.mjtGeom.mjGEOM_CYLINDER
+    return float(centre[2] - size[1] * abs(axis_z) - size[0] * np.sqrt(max(0.0, 1.0 - axis_z**2)))
+
+
+@pytest.mark.parametrize("name", ["g1", "h1", "h1_2"])
+def test_body_hulls_match_posed_geometry(name: str) -> None:
+    """Support points give each body's lowest collision point within 1 mm, on random tumbling poses."""
+    robot = load_robot(name)
+    model, data = robot.model, mujoco.MjData(robot.model)
+    hulls = BodyHulls.from_robot(robot)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        quat = rng.normal(size=4)
+        data.qpos[:3] = [0.0, 0.0, 1.0]
+        data.qpos[3:7] = quat / np.linalg.norm(quat)
+        low, high = robot.joint_range.T
+        data.qpos[robot.qpos_indices] = rng.uniform(low, high)
+        mujoco.mj_kinematics(model, data)
+        ours = hulls.lowest_z(data.xpos[None, 1:], data.xquat[None, 1:], [model.body(b).name for b in range(1, model.nbody)])
+        for k, body in enumerate(hulls.body_ids):
+            exact = min(_exact_lowest_z(model, data, g) for g in collision_geoms(model, int(body)))
+            assert ours[0, k] == pytest.approx(exact, abs=1e-3)
+
+
+def test_knees_through_the_floor_are_seen_with_feet_clear(g1) -> None:
+    """Shins folded back (feet up behind), the body lowered until the feet just clear the floor: the
+    feet-only ruler reads 0, the whole-body one reads the knees' depth."""
+    n_frames = 20
+    joint_pos = _standing(g1, n_frames)
+    names = list(g1.config.joint_names)
+    for side in ("left", "right"):
+        joint_pos[:, names.index(f"{side}_hip_pitch_joint")] = 0.0
+        joint_pos[:, names.index(f"{side}_knee_joint")] = 2.6
+        joint_pos[:, names.index(f"{side}_ankle_pitch_joint")] = 0.0
+    root_quat = np.tile([1.0, 0.0, 0.0, 0.0], (n_frames, 1))
+    contact = np.zeros((n_frames, 2), bool)
+    at_zero = reference_from_joint_trajectory(g1, 50.0, np.zeros((n_frames, 3)), root_quat, joint_pos, contact)
+    feet = FootMeshes.from_robot(g1).lowest_z(at_zero.body_pos_w, at_zero.body_quat_w, at_zero.body_names)
+    root_pos = np.tile([0.0, 0.0, 0.005 - feet.min()], (n_frames, 1))
+    reference = reference_from_joint_trajectory(g1, 50.0, root_pos, root_quat, joint_pos, contact)
+    hulls = BodyHulls.from_robot(g1)
+    lowest = hulls.lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
+    quality = retarget_quality(g1, reference)
+    assert quality["feet_penetration_max_mm"] == 0.0
+    assert quality["penetration_max_mm"] > 100.0
+    assert quality["penetration_max_mm"] == pytest.approx(-1000.0 * lowest.min(), abs=1e-3)
+    assert quality["penetration_deepest_body"] in {f"{s}_{b}" for s in ("left", "right") for b in ("hip_yaw_link", "knee_link")}
+    assert quality_series(g1, reference)["penetration_m"].shape == (n_frames,)
+
+
+def test_pelvis_height_and_divergence_rulers(g1) -> None:
+    """A robot that stays standing while the human lies down is caught; so is a frame far off its targets."""
+    n_frames = 200
+    reference = _hand_built(g1, _standing(g1, n_frames))
+    pelvis = reference.body_names.index("pelvis")
+    human = reference.body_pos_w[:, pelvis].copy()
+    assert retarget_quality(g1, reference, human_pelvis=human)["pelvis_height_dev_p95_m"] == 0.0
+    human[150:, 2] -= 0.6  # the human lies down for the last quarter; the robot does not follow
+    quality = retarget_quality(g1, reference, human_pelvis=human)
+    assert quality["pelvis_height_dev_p95_m"] == pytest.approx(0.6, abs=1e-6)
+    bodies = ["pelvis", "torso_link"]
+    targets = reference.body_pos_w[:, [reference.body_names.index(b) for b in bodies]].copy()
+    targets += 0.01  # a small, even error everywhere ...
+    targets[100:103] += 0.5  # ... and three frames far off
+    quality = retarget_quality(g1, reference, keypoint_targets=targets, keypoint_bodies=bodies)
+    assert quality["diverged_frames"] == 3
+    assert quality["keypoint_error_max_mm"] == pytest.approx(1000.0 * np.sqrt(3 * 0.51**2), abs=1e-3)
+    assert quality["root_speed_p999_m_s"] == 0.0

@@ -1,4 +1,5 @@
-"""Retargeting quality of a reference motion: ground penetration, stance skating, limits, self-collision, smoothness.
+"""Retargeting quality of a reference motion: whole-body floor penetration, pelvis height, stance skating,
+limits, self-collision, smoothness, keypoint error and divergence.
 
 One ruler for every source of reference motions (the LAFAN1_Retargeting_Dataset CSVs, our own retargeting) so
 their numbers can share a table. Heights are measured against the world plane z = 0 with no per-clip ground
@@ -12,11 +13,11 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.robots import Robot
+from rd_pipeline.robots.hulls import BodyHulls, hull_vertices, mesh_points_in_body, rotation_z_row
 from rd_pipeline.robots.model import collision_geoms
 
 QUALITY_FILE = "quality.json"
@@ -35,6 +36,10 @@ class QualityThresholds:
     """Slack beyond the model's joint range before a frame counts as a violation."""
     velocity_limit_tolerance: float = 1e-6
     """Relative slack on each joint's velocity limit."""
+    diverged_ratio: float = 3.0
+    """A frame has diverged when its keypoint error is this many times the take's median ..."""
+    diverged_margin_m: float = 0.15
+    """... and at least this much above it (a low median alone does not make a frame diverged)."""
 
 
 @dataclass(frozen=True)
@@ -63,8 +68,8 @@ class FootMeshes:
             ]
             if not geoms:
                 raise PipelineError(f"{robot.config.source}: foot body '{body}' has no mesh geom to measure")
-            points = np.concatenate([_mesh_points_in_body(model, g) for g in geoms])
-            per_foot.append(_hull_vertices(points))
+            points = np.concatenate([mesh_points_in_body(model, g) for g in geoms])
+            per_foot.append(hull_vertices(points))
         return cls(body_names=robot.config.foot_bodies, vertices=(per_foot[0], per_foot[1]))
 
     def lowest_z(self, body_pos_w: np.ndarray, body_quat_w: np.ndarray, body_names: Sequence[str]) -> np.ndarray:
@@ -75,9 +80,51 @@ class FootMeshes:
                 raise PipelineError(f"foot body '{body}' is not among the reference's bodies")
             index = list(body_names).index(body)
             # Only world z is needed, so only the third row of each rotation matrix.
-            z_row = _rotation_z_row(body_quat_w[:, index])
+            z_row = rotation_z_row(body_quat_w[:, index])
             lowest[:, foot] = body_pos_w[:, index, 2] + (z_row @ vertices.T).min(axis=1)
         return lowest
+
+
+def quality_series(
+    robot: Robot,
+    reference: ReferenceMotion,
+    keypoint_targets: np.ndarray | None = None,
+    keypoint_bodies: Sequence[str] | None = None,
+    human_pelvis: np.ndarray | None = None,
+) -> dict[str, np.ndarray]:
+    """Per-frame rulers on the reference's timeline (for plots and for finding a bad frame).
+
+    `penetration_m`: depth of the deepest point of any collision geom below z = 0, and
+    `penetration_body`: the index into `BodyHulls.body_names` of that body (-1: none below).
+    `keypoint_error_m`: mean distance of the key bodies to their scaled-human targets.
+    `pelvis_height_dev_m`: robot pelvis height minus the scaled human hips height, median offset removed.
+    `root_speed_m_s` / `human_root_speed_m_s`: speed of the floating base and of the scaled human hips.
+    """
+    if tuple(reference.joint_names) != tuple(robot.config.joint_names):
+        raise PipelineError(f"reference joints do not match robot {robot.config.name}'s joint order")
+    if reference.n_frames == 0:
+        raise PipelineError("reference motion has no frames")
+    dt = 1.0 / reference.fps
+    hulls = BodyHulls.from_robot(robot)
+    depth = -hulls.lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
+    deepest = depth.argmax(axis=1)
+    penetration = np.maximum(depth.max(axis=1), 0.0)
+    series = {
+        "penetration_m": penetration,
+        "penetration_body": np.where(penetration > 0, deepest, -1),
+        "root_speed_m_s": np.linalg.norm(_gradient(reference.root_pos, dt), axis=-1),
+    }
+    if keypoint_targets is not None:
+        series["keypoint_error_m"] = _keypoint_error(reference, keypoint_targets, keypoint_bodies)
+    if human_pelvis is not None:
+        human_pelvis = np.asarray(human_pelvis, dtype=float)
+        if human_pelvis.shape != (reference.n_frames, 3):
+            raise PipelineError(f"human_pelvis has shape {human_pelvis.shape}, expected ({reference.n_frames}, 3)")
+        root = reference.body_names.index(robot.config.root_body)
+        difference = reference.body_pos_w[:, root, 2] - human_pelvis[:, 2]
+        series["pelvis_height_dev_m"] = difference - np.median(difference)
+        series["human_root_speed_m_s"] = np.linalg.norm(_gradient(human_pelvis, dt), axis=-1)
+    return series
 
 
 def retarget_quality(
@@ -87,40 +134,58 @@ def retarget_quality(
     keypoint_targets: np.ndarray | None = None,
     keypoint_bodies: Sequence[str] | None = None,
     frames_per_s: float | None = None,
-) -> dict[str, float | int | None]:
+    human_pelvis: np.ndarray | None = None,
+) -> dict[str, float | int | str | None]:
     """SPEC retargeting metrics of one reference motion, as JSON-ready plain numbers.
 
-    `keypoint_targets` (T, K, 3) are the scaled human positions the bodies `keypoint_bodies` should reach;
-    without them `keypoint_error_mean_mm` is None. `frames_per_s` is the retargeter's throughput, passed
-    through. `skate_stance_mean_mm_s` is 0.0 when no foot ever comes within the contact height: a clip
-    that never stands cannot skate, and 0.0 keeps the column numeric across clips.
+    `keypoint_targets` (T, K, 3) are the scaled human positions the bodies `keypoint_bodies` should reach
+    and `human_pelvis` (T, 3) the leg-length-scaled human hips; without them the metrics that need them
+    are None. `frames_per_s` is the retargeter's throughput, passed through. `skate_stance_mean_mm_s` is
+    0.0 when no foot ever comes within the contact height: a clip that never stands cannot skate.
     """
-    if tuple(reference.joint_names) != tuple(robot.config.joint_names):
-        raise PipelineError(f"reference joints do not match robot {robot.config.name}'s joint order")
-    n_frames = reference.n_frames
-    if n_frames == 0:
-        raise PipelineError("reference motion has no frames")
+    series = quality_series(robot, reference, keypoint_targets, keypoint_bodies, human_pelvis)
     dt = 1.0 / reference.fps
-
-    lowest = FootMeshes.from_robot(robot).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
-    penetration = np.maximum(0.0, -lowest).max(axis=1)
+    feet = FootMeshes.from_robot(robot).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
+    feet_penetration = np.maximum(0.0, -feet).max(axis=1)
     foot_index = [reference.body_names.index(b) for b in robot.config.foot_bodies]
     foot_speed = np.linalg.norm(_gradient(reference.body_pos_w[:, foot_index, :2], dt), axis=-1)
-    stance = lowest < thresholds.ground_contact_height_m
+    stance = feet < thresholds.ground_contact_height_m
     skate = float(foot_speed[stance].mean()) if stance.any() else 0.0
+    penetration = series["penetration_m"]
+    deepest = int(series["penetration_body"][penetration.argmax()])
+    hull_bodies = BodyHulls.from_robot(robot).body_names
+    error = series.get("keypoint_error_m")
+    pelvis_dev = series.get("pelvis_height_dev_m")
+    human_speed = series.get("human_root_speed_m_s")
 
     return {
-        "frames": int(n_frames),
+        "frames": int(reference.n_frames),
         "fps_frames_per_s": None if frames_per_s is None else _round(frames_per_s),
         "penetration_max_mm": _round(1000.0 * penetration.max()),
         "penetration_p95_mm": _round(1000.0 * np.percentile(penetration, 95.0)),
+        "penetration_deepest_body": hull_bodies[deepest] if deepest >= 0 else None,
+        "feet_penetration_max_mm": _round(1000.0 * feet_penetration.max()),
+        "feet_penetration_p95_mm": _round(1000.0 * np.percentile(feet_penetration, 95.0)),
+        "pelvis_height_dev_p95_m": None if pelvis_dev is None else _round(np.percentile(np.abs(pelvis_dev), 95.0)),
         "skate_stance_mean_mm_s": _round(1000.0 * skate),
         "joint_limit_violations": _joint_limit_violations(robot, reference.joint_pos, thresholds),
         "velocity_limit_violations": _velocity_limit_violations(robot, reference.joint_pos, dt, thresholds),
         "self_collision_frames": self_collision_frames(robot, reference, thresholds.self_collision_depth_m),
         "jerk_mean": _round(_jerk_mean(reference.joint_pos, dt)),
-        "keypoint_error_mean_mm": _keypoint_error_mm(reference, keypoint_targets, keypoint_bodies),
+        "keypoint_error_mean_mm": None if error is None else _round(1000.0 * error.mean()),
+        "keypoint_error_p95_mm": None if error is None else _round(1000.0 * np.percentile(error, 95.0)),
+        "keypoint_error_max_mm": None if error is None else _round(1000.0 * error.max()),
+        "diverged_frames": None if error is None else int(diverged(error, thresholds).sum()),
+        "root_speed_p999_m_s": _round(np.percentile(series["root_speed_m_s"], 99.9)),
+        "human_root_speed_p999_m_s": None if human_speed is None else _round(np.percentile(human_speed, 99.9)),
     }
+
+
+def diverged(keypoint_error: np.ndarray, thresholds: QualityThresholds) -> np.ndarray:
+    """(T,) bool: frames whose keypoint error is far above the take's median (both a ratio and a margin)."""
+    median = float(np.median(keypoint_error))
+    limit = max(thresholds.diverged_ratio * median, median + thresholds.diverged_margin_m)
+    return keypoint_error > limit
 
 
 def self_collision_frames(robot: Robot, reference: ReferenceMotion, depth_m: float) -> int:
@@ -201,11 +266,8 @@ def _jerk_mean(joint_pos: np.ndarray, dt: float) -> float:
     return float(np.abs(np.diff(joint_pos, n=3, axis=0)).mean() / dt**3)
 
 
-def _keypoint_error_mm(
-    reference: ReferenceMotion, targets: np.ndarray | None, bodies: Sequence[str] | None
-) -> float | None:
-    if targets is None:
-        return None
+def _keypoint_error(reference: ReferenceMotion, targets: np.ndarray, bodies: Sequence[str] | None) -> np.ndarray:
+    """(T,) mean distance (m) of the key bodies to their targets."""
     if bodies is None:
         raise PipelineError("keypoint_targets given without keypoint_bodies")
     targets = np.asarray(targets, dtype=float)
@@ -217,8 +279,7 @@ def _keypoint_error_mm(
     if missing:
         raise PipelineError(f"keypoint body '{missing[0]}' is not among the reference's bodies")
     index = [reference.body_names.index(b) for b in bodies]
-    error = np.linalg.norm(reference.body_pos_w[:, index] - targets, axis=-1)
-    return _round(1000.0 * error.mean())
+    return np.linalg.norm(reference.body_pos_w[:, index] - targets, axis=-1).mean(axis=1)
 
 
 def _gradient(values: np.ndarray, dt: float) -> np.ndarray:
@@ -226,35 +287,6 @@ def _gradient(values: np.ndarray, dt: float) -> np.ndarray:
     if values.shape[0] < 2:
         return np.zeros_like(values)
     return np.gradient(values, dt, axis=0)
-
-
-def _mesh_points_in_body(model: mujoco.MjModel, geom: int) -> np.ndarray:
-    """(V, 3) vertices of a mesh geom in its body frame.
-
-    MuJoCo stores mesh vertices recentred on the mesh's own frame; geom_pos / geom_quat put that frame
-    back in the body.
-    """
-    mesh = model.geom_dataid[geom]
-    start, count = model.mesh_vertadr[mesh], model.mesh_vertnum[mesh]
-    vertices = model.mesh_vert[start:start + count].astype(float)
-    rotation = np.empty(9)
-    mujoco.mju_quat2Mat(rotation, model.geom_quat[geom])
-    return vertices @ rotation.reshape(3, 3).T + model.geom_pos[geom]
-
-
-def _hull_vertices(points: np.ndarray) -> np.ndarray:
-    """The extreme point along any direction is a hull vertex, so the hull is all a lowest-point query needs."""
-    try:
-        return points[ConvexHull(points).vertices]
-    except QhullError:  # flat or degenerate meshes: keep every point
-        return points
-
-
-def _rotation_z_row(quat_wxyz: np.ndarray) -> np.ndarray:
-    """(T, 3) third row of the rotation matrix of unit quaternions (T, 4 wxyz)."""
-    quat = quat_wxyz / np.linalg.norm(quat_wxyz, axis=-1, keepdims=True)
-    w, x, y, z = quat[..., 0], quat[..., 1], quat[..., 2], quat[..., 3]
-    return np.stack([2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)], axis=-1)
 
 
 def _round(value: float) -> float:

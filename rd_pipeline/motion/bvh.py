@@ -44,6 +44,8 @@ class BvhClip:
     """Seconds per frame."""
     channels: np.ndarray
     """(T, C) channel values in file order (degrees, file units)."""
+    warnings: tuple[str, ...] = ()
+    """Quirks of the file that were read past (e.g. a `Frames:` count one more than the lines)."""
 
     @property
     def names(self) -> list[str]:
@@ -68,6 +70,7 @@ class _Parser:
         self.path, self.lines, self.pos = path, lines, 0
         self.joints: list[BvhJoint] = []
         self.n_channels = 0
+        self.warnings: list[str] = []
 
     def fail(self, message: str, line: int | None = None) -> PipelineError:
         line = self.pos if line is None else line
@@ -99,7 +102,8 @@ class _Parser:
         frame_time = self.header_number("Frame Time:", float)
         if not np.isfinite(frame_time) or frame_time <= 0:
             raise self.fail(f"Frame Time must be a positive number, got {frame_time}")
-        return BvhClip(tuple(self.joints), frame_time, self.motion_block(n_frames))
+        channels = self.motion_block(n_frames)
+        return BvhClip(tuple(self.joints), frame_time, channels, tuple(self.warnings))
 
     def parse_joint(self, name: str, parent: int) -> None:
         if self.next_tokens() != ["{"]:
@@ -170,6 +174,13 @@ class _Parser:
         rows = [line.split() for line in self.lines[first:]]
         while rows and not rows[-1]:
             rows.pop()
+        if len(rows) == n_frames - 1 and len(rows[-1]) == self.n_channels:
+            # Some distributed LAFAN1 takes count one frame more than they hold; every line is whole,
+            # so the data is complete and only the header is off.
+            self.warnings.append(
+                f"{self.path}: Frames says {n_frames} but the file has {len(rows)} whole motion lines; read {len(rows)}"
+            )
+            n_frames = len(rows)
         if len(rows) < n_frames:
             raise self.fail(f"truncated: Frames says {n_frames} but the file has {len(rows)} motion lines", first + len(rows))
         if len(rows) > n_frames:

@@ -50,6 +50,8 @@ class RetargetTargets:
     """(T, 2) left/right foot planted, from the human feet."""
     human_scale: float
     """Global human-to-robot scale (leg-length ratio) applied to the root."""
+    human_pelvis: np.ndarray
+    """(T, 3) the human hips scaled by `human_scale`, before any shaping (the pelvis height ruler)."""
 
     @property
     def n_frames(self) -> int:
@@ -58,7 +60,7 @@ class RetargetTargets:
     def save(self, path) -> None:
         """Keypoint targets for viewing beside the robot (the orientations are not needed there)."""
         np.savez(path, fps=self.fps, bodies=np.array(self.bodies), human_joints=np.array(self.human_joints),
-                 positions=self.positions, foot_contact=self.foot_contact)
+                 positions=self.positions, foot_contact=self.foot_contact, human_pelvis=self.human_pelvis)
 
 
 def resample_human(human: HumanMotion, fps: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -164,7 +166,7 @@ def build_targets(
     return RetargetTargets(
         fps=fps, bodies=tuple(bodies), human_joints=tuple(joints),
         positions=np.stack([targets[j] for j in joints], axis=1), orientations=orientations,
-        foot_contact=contact, human_scale=root_scale,
+        foot_contact=contact, human_scale=root_scale, human_pelvis=human_pos[:, index[PELVIS]] * root_scale,
     )
 
 

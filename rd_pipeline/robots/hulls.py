@@ -1,0 +1,115 @@
+"""Each body's collision geometry as points with radii, for lowest-point queries against the floor.
+
+A geom's lowest world point along any direction is one of a few support points grown by a radius:
+a sphere's centre, a capsule's two end centres (radius r), a box's corners, a cylinder's rim, a
+mesh's convex-hull vertices (radius 0). The floor ruler and the IK ground limit share this.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from rd_pipeline.robots import Robot
+from rd_pipeline.robots.model import collision_geoms
+
+_RIM_POINTS = 24
+"""Points per cylinder rim: the lowest rim point is found within r * (1 - cos(pi / 24)) = 0.9% of r."""
+
+
+@dataclass(frozen=True)
+class BodyHulls:
+    """Support points of every body's collision geoms, in the body frame."""
+
+    body_names: tuple[str, ...]
+    """Bodies with collision geometry, in model order."""
+    body_ids: np.ndarray
+    """(N,) MuJoCo body id of each."""
+    points: tuple[np.ndarray, ...]
+    """Per body, (V, 3) support points in the body frame."""
+    radii: tuple[np.ndarray, ...]
+    """Per body, (V,) radius grown around each point."""
+
+    @classmethod
+    def from_robot(cls, robot: Robot) -> BodyHulls:
+        model = robot.model
+        names, ids, points, radii = [], [], [], []
+        for body in range(1, model.nbody):
+            geoms = collision_geoms(model, body)
+            if not geoms:
+                continue
+            support = [_geom_support(model, g) for g in geoms]
+            names.append(model.body(body).name)
+            ids.append(body)
+            points.append(np.concatenate([p for p, _ in support]))
+            radii.append(np.concatenate([r for _, r in support]))
+        return cls(tuple(names), np.array(ids), tuple(points), tuple(radii))
+
+    def lowest_z(self, body_pos_w: np.ndarray, body_quat_w: np.ndarray, body_names: Sequence[str]) -> np.ndarray:
+        """(T, N) lowest world z of each body's collision geometry from body poses (T, B, 3), (T, B, 4 wxyz)."""
+        index = {name: i for i, name in enumerate(body_names)}
+        lowest = np.empty((body_pos_w.shape[0], len(self.body_names)))
+        for k, (body, points, radii) in enumerate(zip(self.body_names, self.points, self.radii)):
+            i = index[body]
+            z_row = rotation_z_row(body_quat_w[:, i])
+            lowest[:, k] = body_pos_w[:, i, 2] + (z_row @ points.T - radii).min(axis=1)
+        return lowest
+
+
+def rotation_z_row(quat_wxyz: np.ndarray) -> np.ndarray:
+    """(T, 3) third row of the rotation matrix of unit quaternions (T, 4 wxyz): world z of body axes."""
+    quat = quat_wxyz / np.linalg.norm(quat_wxyz, axis=-1, keepdims=True)
+    w = quat[..., 0]
+    x = quat[..., 1]
+    y = quat[..., 2]
+    z = quat[..., 3]
+    return np.stack([2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)], axis=-1)
+
+
+def mesh_points_in_body(model: mujoco.MjModel, geom: int) -> np.ndarray:
+    """(V, 3) vertices of a mesh geom in its body frame (MuJoCo recentres meshes on the geom frame)."""
+    mesh = model.geom_dataid[geom]
+    start = model.mesh_vertadr[mesh]
+    count = model.mesh_vertnum[mesh]
+    vertices = model.mesh_vert[start:start + count].astype(float)
+    return _to_body(model, geom, vertices)
+
+
+def hull_vertices(points: np.ndarray) -> np.ndarray:
+    """The extreme point along any direction is a hull vertex, so the hull is all a lowest-point query needs."""
+    try:
+        return points[ConvexHull(points).vertices]
+    except QhullError:  # flat or degenerate meshes: keep every point
+        return points
+
+
+def _geom_support(model: mujoco.MjModel, geom: int) -> tuple[np.ndarray, np.ndarray]:
+    kind = model.geom_type[geom]
+    size = model.geom_size[geom]
+    if kind == mujoco.mjtGeom.mjGEOM_MESH:
+        vertices = hull_vertices(mesh_points_in_body(model, geom))
+        return vertices, np.zeros(len(vertices))
+    if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+        return _to_body(model, geom, np.zeros((1, 3))), np.array([size[0]])
+    if kind == mujoco.mjtGeom.mjGEOM_CAPSULE:
+        ends = np.array([[0.0, 0.0, -size[1]], [0.0, 0.0, size[1]]])
+        return _to_body(model, geom, ends), np.full(2, size[0])
+    if kind == mujoco.mjtGeom.mjGEOM_BOX:
+        corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * size
+        return _to_body(model, geom, corners), np.zeros(8)
+    if kind == mujoco.mjtGeom.mjGEOM_CYLINDER:
+        angle = np.linspace(0.0, 2.0 * np.pi, _RIM_POINTS, endpoint=False)
+        rim = size[0] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+        points = np.concatenate([np.column_stack([rim, np.full(_RIM_POINTS, z)]) for z in (-size[1], size[1])])
+        return _to_body(model, geom, points), np.zeros(len(points))
+    raise ValueError(f"geom {geom} of type {kind} has no lowest-point support")
+
+
+def _to_body(model: mujoco.MjModel, geom: int, points: np.ndarray) -> np.ndarray:
+    rotation = np.empty(9)
+    mujoco.mju_quat2Mat(rotation, model.geom_quat[geom])
+    return points @ rotation.reshape(3, 3).T + model.geom_pos[geom]
