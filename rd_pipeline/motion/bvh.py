@@ -174,7 +174,10 @@ class _Parser:
         rows = [line.split() for line in self.lines[first:]]
         while rows and not rows[-1]:
             rows.pop()
-        if len(rows) == n_frames - 1 and len(rows[-1]) == self.n_channels:
+        for i, row in enumerate(rows):
+            if len(row) != self.n_channels:
+                raise self.fail(f"expected {self.n_channels} values on a motion line, got {len(row)}", first + i + 1)
+        if rows and len(rows) == n_frames - 1:
             # Some distributed LAFAN1 takes count one frame more than they hold; every line is whole,
             # so the data is complete and only the header is off.
             self.warnings.append(
@@ -185,9 +188,6 @@ class _Parser:
             raise self.fail(f"truncated: Frames says {n_frames} but the file has {len(rows)} motion lines", first + len(rows))
         if len(rows) > n_frames:
             raise self.fail(f"{len(rows) - n_frames} motion lines beyond Frames: {n_frames}", first + n_frames + 1)
-        for i, row in enumerate(rows):
-            if len(row) != self.n_channels:
-                raise self.fail(f"expected {self.n_channels} values on a motion line, got {len(row)}", first + i + 1)
         flat = [token for row in rows for token in row]
         try:
             values = np.array(flat, dtype=np.float64).reshape(n_frames, self.n_channels)
