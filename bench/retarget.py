@@ -52,7 +52,7 @@ def main() -> None:
         for name in args.robots:
             robot = load_robot(name)
             began = time.perf_counter()
-            result = retarget(human, robot, params.fps, params.contact, params.shape, params.weights, params.ik)
+            result = retarget(human, robot, params.fps, params.contact, params.shape, params.body_contact, params.weights, params.ik)
             seconds = time.perf_counter() - began
             ours = retarget_quality(
                 robot, result.reference, keypoint_targets=result.targets.positions,

@@ -9,7 +9,7 @@ from typing import Any
 
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.motion.contact import ContactThresholds
-from rd_pipeline.retarget.settings import IkSettings, IkWeights, TargetShaping
+from rd_pipeline.retarget.settings import BodyContactSettings, IkSettings, IkWeights, TargetShaping
 from rd_pipeline.robots.assets import model_files
 
 
@@ -23,6 +23,8 @@ class RetargetParams:
     """When a human foot counts as planted."""
     shape: TargetShaping = TargetShaping()
     """How the human motion becomes robot targets."""
+    body_contact: BodyContactSettings = BodyContactSettings()
+    """When knees, elbows, hands, pelvis and torso rest on the floor."""
     weights: IkWeights = IkWeights()
     """IK task costs."""
     ik: IkSettings = IkSettings()
@@ -41,7 +43,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     robot = load_robot(ctx.robot)
     human = HumanMotion.load(ctx.upstream["human_motion"].path / HUMAN_MOTION_FILE)
     began = time.perf_counter()
-    result = retarget(human, robot, p.fps, p.contact, p.shape, p.weights, p.ik,
+    result = retarget(human, robot, p.fps, p.contact, p.shape, p.body_contact, p.weights, p.ik,
                       track=lambda frames, total: ctx.track(frames, total, f"IK {ctx.robot}"))
     seconds = time.perf_counter() - began
     reference, targets = result.reference, result.targets

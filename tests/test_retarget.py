@@ -16,7 +16,7 @@ from rd_pipeline.evaluation.retarget_quality import retarget_quality
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
-from rd_pipeline.retarget.targets import _runs
+from rd_pipeline.motion.contact import contact_runs
 from rd_pipeline.robots import load_robot
 from stages.retarget import RetargetParams
 
@@ -37,7 +37,7 @@ def _human(motion: str, seconds: float | None = None) -> HumanMotion:
 
 def _retarget(robot: str, human: HumanMotion) -> RetargetResult:
     p = RetargetParams()
-    return retarget(human, load_robot(robot), p.fps, p.contact, p.shape, p.weights, p.ik)
+    return retarget(human, load_robot(robot), p.fps, p.contact, p.shape, p.body_contact, p.weights, p.ik)
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +64,7 @@ def test_planted_feet_stay_put_and_flat(g1_dance: RetargetResult) -> None:
     assert 0.3 < reference.foot_contact.mean() < 0.95
     for side, foot in enumerate(robot.config.foot_bodies):
         b = reference.body_names.index(foot)
-        for start, end in _runs(reference.foot_contact[:, side]):
+        for start, end in contact_runs(reference.foot_contact[:, side]):
             if end - start < 10:
                 continue
             # Away from the ends of a plant (where the smoothing eases in), the foot does not move.
@@ -112,7 +112,7 @@ def test_retarget_map_with_an_unknown_human_joint() -> None:
     broken = dataclasses.replace(robot, config=config)
     p = RetargetParams()
     with pytest.raises(PipelineError, match=r"bodies.retarget names human joint 'LeftElbow', not in the skeleton"):
-        retarget(_human("dance1_subject2", seconds=1.0), broken, p.fps, p.contact, p.shape, p.weights, p.ik)
+        retarget(_human("dance1_subject2", seconds=1.0), broken, p.fps, p.contact, p.shape, p.body_contact, p.weights, p.ik)
 
 
 def test_stage_writes_reference_and_quality(artifacts: Path) -> None:

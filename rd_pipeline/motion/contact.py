@@ -36,3 +36,10 @@ def label_contacts(foot_pos: np.ndarray, fps: float, ground_z: float, thresholds
         state = np.where(state, ~must_exit[t], may_enter[t])
         contact[t] = state
     return contact
+
+
+def contact_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, end) of each run of True in a (T,) mask."""
+    padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    edges = np.flatnonzero(np.diff(padded))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))

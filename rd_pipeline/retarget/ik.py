@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Iterable
 
 import mink
 import mujoco
 import numpy as np
+from scipy.ndimage import maximum_filter1d
+from scipy.spatial.transform import Rotation
 
+from rd_pipeline.retarget.floor import FloorLimit
 from rd_pipeline.retarget.limits import FrameStepLimit
 from rd_pipeline.retarget.settings import IkSettings, IkWeights
 from rd_pipeline.retarget.targets import RetargetTargets
 from rd_pipeline.robots import Robot
+from rd_pipeline.robots.hulls import BodyHulls
 from rd_pipeline.robots.model import collision_geoms
 
 
@@ -26,6 +31,7 @@ class RetargetIk:
         oriented = set(targets.orientations)
         feet = set(config.foot_bodies)
         self.frame_tasks: list[mink.FrameTask] = []
+        self.position_costs: list[float] = []
         for body in targets.bodies:
             if body == config.root_body:
                 cost = (weights.root_position, weights.root_orientation)
@@ -35,6 +41,7 @@ class RetargetIk:
                 cost = (weights.limb_position, weights.torso_orientation)
             else:
                 cost = (weights.limb_position, 0.0)
+            self.position_costs.append(cost[0])
             self.frame_tasks.append(mink.FrameTask(
                 body, "body", position_cost=cost[0], orientation_cost=cost[1], lm_damping=settings.lm_damping,
             ))
@@ -46,13 +53,14 @@ class RetargetIk:
         self.step_limit = FrameStepLimit(
             robot.dof_indices, robot.joint_range[:, 0], robot.joint_range[:, 1], robot.qpos_indices, model.nv,
             config.velocity_limit * frame_period * settings.velocity_margin,
-            np.array([settings.root_speed_m_s] * 3 + [settings.root_angular_speed_rad_s] * 3) * frame_period,
         )
+        self.root_steps = _root_step_budget(targets, config.root_body, settings)
+        self.floor = FloorLimit(model, BodyHulls.from_robot(robot), settings.floor_clearance_m, settings.floor_detection_m)
         pairs = [
             (collision_geoms(model, robot.body_ids[a]), collision_geoms(model, robot.body_ids[b]))
             for a, b in config.collision_pairs
         ]
-        self.limits: list[mink.Limit] = [self.step_limit]
+        self.limits: list[mink.Limit] = [self.step_limit, self.floor]
         if pairs:
             self.limits.append(mink.CollisionAvoidanceLimit(
                 model, pairs, minimum_distance_from_collisions=settings.collision_margin_m,
@@ -60,6 +68,8 @@ class RetargetIk:
             ))
         self.tasks = [*self.frame_tasks, self.posture]
         self.damping = weights.damping
+        self.contact_cost = weights.contact_position
+        self.key_body_ids = np.array([robot.body_ids[b] for b in targets.bodies])
 
     def initial_configuration(self) -> np.ndarray:
         """Default pose placed at the first frame's pelvis target."""
@@ -72,10 +82,17 @@ class RetargetIk:
         rotation = self.targets.orientations.get(self.robot.config.root_body)
         if rotation is not None:
             mujoco.mju_mat2Quat(q[3:7], rotation[0].reshape(-1))
+        # A take that starts on the floor must not start below it.
+        self.configuration.update(q)
+        lowest, _ = self.floor.lowest_points(self.configuration.data)
+        q[2] += max(0.0, self.settings.floor_clearance_m - float(lowest.min()))
         return q
 
     def _set_frame_targets(self, t: int) -> None:
         targets = self.targets
+        for k, task in enumerate(self.frame_tasks):
+            resting = targets.body_contact[t, k]
+            task.set_position_cost(self.contact_cost if resting else self.position_costs[k])
         for task, body in zip(self.frame_tasks, targets.bodies):
             rotation = targets.orientations.get(body)
             so3 = mink.SO3.from_matrix(rotation[t]) if rotation is not None else mink.SO3.identity()
@@ -96,17 +113,43 @@ class RetargetIk:
             self._set_frame_targets(t)
             hold.set_target(smoothed[t])
             self.configuration.update(smoothed[t])
-            self.step_limit.start_frame(previous)
-            self.step_limit.root_budget = np.zeros(6)
+            self.step_limit.start_frame(previous, np.zeros(6))
             for _ in range(self.settings.refine_iterations):
-                velocity = mink.solve_ik(
-                    self.configuration, [*foot_tasks, hold], 1.0, self.settings.solver, damping=self.damping,
-                    limits=self.limits,
-                )
-                self.configuration.integrate_inplace(velocity, 1.0)
+                self._iterate([*foot_tasks, hold])
             out[t] = self._clipped(self.configuration.q)
             previous = out[t]
         return out
+
+    def _keypoint_error(self, t: int) -> float:
+        """Mean distance of the key bodies to their targets in the current configuration."""
+        positions = self.configuration.data.xpos[self.key_body_ids]
+        return float(np.linalg.norm(positions - self.targets.positions[t], axis=1).mean())
+
+    def _lagging(self, t: int, recent: deque[float]) -> bool:
+        if not recent:
+            return False
+        return self._keypoint_error(t) > float(np.median(recent)) + self.settings.catch_up_margin_m
+
+    def _iterate(self, tasks: list) -> None:
+        velocity = self._step(tasks)
+        self.configuration.integrate_inplace(velocity, 1.0)
+        self.step_limit.spend_root_step(velocity[:6])
+
+    def _step(self, tasks: list) -> np.ndarray:
+        """One QP step; if climbing back above the floor clearance is infeasible with the frame's
+        bounds, take the step that only stops the sinking."""
+        try:
+            return mink.solve_ik(
+                self.configuration, tasks, 1.0, self.settings.solver, damping=self.damping, limits=self.limits,
+            )
+        except mink.NoSolutionFound:
+            self.floor.relaxed = True
+            try:
+                return mink.solve_ik(
+                    self.configuration, tasks, 1.0, self.settings.solver, damping=self.damping, limits=self.limits,
+                )
+            finally:
+                self.floor.relaxed = False
 
     def _clipped(self, q: np.ndarray) -> np.ndarray:
         q = q.copy()
@@ -119,16 +162,41 @@ class RetargetIk:
         out = np.empty((targets.n_frames, self.robot.model.nq))
         self.configuration.update(self.initial_configuration())
         previous = None
+        recent: deque[float] = deque(maxlen=max(1, int(round(self.settings.catch_up_window_s * targets.fps))))
         for t in frames:
             self._set_frame_targets(t)
-            self.step_limit.start_frame(previous)
+            self.step_limit.start_frame(previous, self.root_steps[t])
             # The first frame starts from the default pose, so it gets more iterations to converge.
             for _ in range(self.settings.iterations if previous is not None else 50):
-                velocity = mink.solve_ik(
-                    self.configuration, self.tasks, 1.0, self.settings.solver, damping=self.damping, limits=self.limits,
-                )
-                self.configuration.integrate_inplace(velocity, 1.0)
-                self.step_limit.spend_root_step(velocity[:6])
+                self._iterate(self.tasks)
+            # A frame that fell far behind its targets (a fall, a fast turn) is solved further, within
+            # the same per-frame bounds, instead of carrying the lag into the next frames.
+            extra = 0
+            while extra < self.settings.catch_up_iterations and self._lagging(t, recent):
+                self._iterate(self.tasks)
+                extra += 1
+            recent.append(self._keypoint_error(t))
             out[t] = self._clipped(self.configuration.q)
             previous = out[t]
         return out
+
+
+def _root_step_budget(targets: RetargetTargets, root_body: str, settings: IkSettings) -> np.ndarray:
+    """(T, 6) how far the floating base may move in each frame, per tangent axis (world linear,
+    body angular): a multiple of its own target's fastest motion nearby plus a floor, so the root
+    can catch up in a fast transition but never runs faster than the human it follows."""
+    period = 1.0 / targets.fps
+    window = 2 * int(round(settings.root_speed_window_s * targets.fps)) + 1
+    position = targets.positions[:, targets.bodies.index(root_body)]
+    linear = maximum_filter1d(np.abs(np.diff(position, axis=0, prepend=position[:1])), window, axis=0)
+    steps = np.empty((targets.n_frames, 6))
+    steps[:, :3] = settings.root_speed_ratio * linear + settings.root_speed_floor_m_s * period
+    rotation = targets.orientations.get(root_body)
+    if rotation is None:
+        steps[:, 3:] = np.inf
+        return steps
+    relative = np.einsum("tji,tjk->tik", rotation[:-1], rotation[1:])  # previous^T @ next: body frame
+    angular = np.abs(Rotation.from_matrix(relative).as_rotvec())
+    angular = maximum_filter1d(np.concatenate([angular[:1], angular]), window, axis=0)
+    steps[:, 3:] = settings.root_angular_speed_ratio * angular + settings.root_angular_speed_floor_rad_s * period
+    return steps

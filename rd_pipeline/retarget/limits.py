@@ -15,7 +15,7 @@ class FrameStepLimit(mink.Limit):
     """
 
     def __init__(self, dof_indices: np.ndarray, lower: np.ndarray, upper: np.ndarray, qpos_indices: np.ndarray,
-                 nv: int, max_step: np.ndarray, root_max_step: np.ndarray) -> None:
+                 nv: int, max_step: np.ndarray) -> None:
         self.dof_indices, self.qpos_indices = dof_indices, qpos_indices
         self.range_lower, self.range_upper, self.max_step = lower, upper, max_step
         self.lower, self.upper = lower.copy(), upper.copy()
@@ -25,17 +25,17 @@ class FrameStepLimit(mink.Limit):
         # their rate limit, the solver throws the whole body around to reach the targets.
         self.root_projection = np.zeros((6, nv))
         self.root_projection[np.arange(6), np.arange(6)] = 1.0
-        self.root_max_step = root_max_step
         self.root_budget = np.full(6, np.inf)
         self.G = np.vstack([self.projection, -self.projection, self.root_projection, -self.root_projection])
 
-    def start_frame(self, previous_q: np.ndarray | None) -> None:
-        """Bounds for the next frame, around the previous frame's joint positions."""
+    def start_frame(self, previous_q: np.ndarray | None, root_max_step: np.ndarray) -> None:
+        """Bounds for the next frame, around the previous frame's joint positions; the floating base
+        may move by `root_max_step` (6,) per tangent axis in this frame."""
         if previous_q is None:
             self.lower, self.upper = self.range_lower.copy(), self.range_upper.copy()
             self.root_budget = np.full(6, np.inf)
             return
-        self.root_budget = self.root_max_step.copy()
+        self.root_budget = root_max_step.copy()
         joints = previous_q[self.qpos_indices]
         self.lower = np.maximum(self.range_lower, joints - self.max_step)
         self.upper = np.minimum(self.range_upper, joints + self.max_step)

@@ -14,10 +14,11 @@ from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
 from rd_pipeline.retarget.ik import RetargetIk
-from rd_pipeline.retarget.settings import IkSettings, IkWeights, TargetShaping
+from rd_pipeline.retarget.settings import BodyContactSettings, IkSettings, IkWeights, TargetShaping
 from rd_pipeline.retarget.smoothing import smooth_cover
 from rd_pipeline.retarget.targets import RetargetTargets, build_targets
 from rd_pipeline.robots import Robot
+from rd_pipeline.robots.hulls import BodyHulls
 
 
 @dataclass(frozen=True)
@@ -34,7 +35,7 @@ class RetargetResult:
 
 def retarget(
     human: HumanMotion, robot: Robot, fps: float, contact: ContactThresholds, shape: TargetShaping,
-    weights: IkWeights, settings: IkSettings,
+    body_contact: BodyContactSettings, weights: IkWeights, settings: IkSettings,
     track: Callable[[Iterable[int], int], Iterable[int]] = lambda frames, total: frames,
 ) -> RetargetResult:
     """Retarget `human` onto `robot` at `fps`; `track` wraps the frame loops (progress bars).
@@ -48,7 +49,7 @@ def retarget(
     if human.duration_s < 1.0 / fps:
         raise PipelineError(f"clip of {human.duration_s:.4f} s is shorter than one frame period (1/{fps:g} s)")
     feet = FootMeshes.from_robot(robot)
-    targets = build_targets(human, robot, fps, feet.vertices, contact, shape)
+    targets = build_targets(human, robot, fps, feet.vertices, contact, shape, body_contact)
     ik = RetargetIk(robot, targets, weights, settings)
     qpos = ik.solve(track(range(targets.n_frames), targets.n_frames))
     if settings.trajectory_smoothing_s > 0:
@@ -61,8 +62,9 @@ def retarget(
         qpos[:, 3:7] /= np.linalg.norm(qpos[:, 3:7], axis=1, keepdims=True)
         qpos = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames))
     reference = _reference(robot, qpos, targets)
-    lowest = feet.lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names).min(axis=1)
-    lift = smooth_cover(np.maximum(-lowest, 0.0), fps, 0.05)
+    # The IK keeps every body above the floor; smoothing can still dip a body by a few millimetres.
+    lowest = BodyHulls.from_robot(robot).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
+    lift = smooth_cover(np.maximum(-lowest.min(axis=1), 0.0), fps, 0.05)
     if lift.any():
         qpos[:, 2] += lift
         reference = _reference(robot, qpos, targets)

@@ -17,6 +17,30 @@ class TargetShaping:
     """Time a swing foot takes to rise to its clearance before it travels (and to come down after)."""
     reach_fraction: float = 0.97
     """Fraction of the straight-leg length a planted leg may use; beyond it the body is lowered."""
+    planted_tilt_rad: float = 0.35
+    """A planted human foot tilted more than this (kneeling, tiptoe) keeps its tilt; flatter ones are laid flat."""
+
+
+@dataclass(frozen=True)
+class BodyContactSettings:
+    """When a human knee, elbow, hand, pelvis or torso rests on the floor (LAFAN1's floor is z = 0)."""
+
+    limb_height_m: float = 0.10
+    """A limb joint (knee, elbow, wrist) below this height may be on the floor ..."""
+    trunk_height_m: float = 0.20
+    """... a trunk joint (`trunk_joints`) below this one, as it sits deeper inside the body ..."""
+    enter_speed_m_s: float = 0.3
+    """... when it also moves horizontally slower than this."""
+    exit_margin_m: float = 0.04
+    """A joint in contact leaves the floor this far above its entry height ..."""
+    exit_speed_m_s: float = 0.6
+    """... or when it moves faster than this (rolling, sliding)."""
+    trunk_joints: tuple[str, ...] = ("Hips", "Spine2")
+    """LAFAN1 joints that rest on the floor at `trunk_height_m`."""
+    excluded_joints: tuple[str, ...] = ("LeftFoot", "RightFoot", "LeftUpLeg", "RightUpLeg", "LeftArm", "RightArm")
+    """Joints never held by this rule: the feet are planted separately; hips and shoulders are rigid on the trunk."""
+    release_s: float = 0.3
+    """After a contact ends, the held target fades back to the human path over this time."""
 
 
 @dataclass(frozen=True)
@@ -35,6 +59,8 @@ class IkWeights:
     """Feet orientation (planted feet stay flat)."""
     limb_position: float = 0.5
     """Knees, hips, shoulders, elbows and hands."""
+    contact_position: float = 20.0
+    """A knee, elbow, hand, pelvis or torso while it rests on the floor (held still there)."""
     posture: float = 0.05
     """Pull toward the default pose, for joints the key bodies leave free."""
     damping: float = 0.05
@@ -55,10 +81,26 @@ class IkSettings:
     """Minimum distance kept between configured collision pairs."""
     collision_detection_m: float = 0.15
     """Distance under which a collision pair enters the QP."""
-    root_speed_m_s: float = 4.0
-    """Bound on the pelvis speed per axis (m/s), applied per frame."""
-    root_angular_speed_rad_s: float = 12.0
-    """Bound on the pelvis angular speed per axis (rad/s), applied per frame."""
+    root_speed_ratio: float = 1.5
+    """The pelvis may move per frame, per axis, this many times as far as its target does ..."""
+    root_speed_floor_m_s: float = 0.5
+    """... plus this speed (m/s), so it can settle where the target stands still."""
+    root_angular_speed_ratio: float = 1.5
+    """The pelvis may turn per frame, per body axis, this many times as far as its target does ..."""
+    root_angular_speed_floor_rad_s: float = 2.0
+    """... plus this angular speed (rad/s)."""
+    root_speed_window_s: float = 0.25
+    """The pelvis target's motion is taken as its fastest within this many seconds either side."""
+    catch_up_iterations: int = 8
+    """Extra solver iterations a frame may take when it lags its targets ..."""
+    catch_up_margin_m: float = 0.03
+    """... by this much more than the median keypoint error of the recent frames ..."""
+    catch_up_window_s: float = 2.0
+    """... over this many seconds."""
+    floor_clearance_m: float = 0.002
+    """Every collision body keeps at least this height above the floor."""
+    floor_detection_m: float = 0.05
+    """Bodies closer to the floor than this (beyond the clearance) enter the QP."""
     trajectory_smoothing_s: float = 0.03
     """Gaussian sigma (s) of the sequence-level smoothing of the solved trajectory (0: none)."""
     refine_iterations: int = 2

@@ -17,3 +17,9 @@ def smooth_cover(need: np.ndarray, fps: float, sigma_s: float) -> np.ndarray:
     sigma = sigma_s * fps
     widened = maximum_filter1d(need, size=int(6 * sigma) + 1)
     return np.maximum(gaussian_filter1d(widened, sigma), need)
+
+
+def smoothstep(s: np.ndarray) -> np.ndarray:
+    """Quintic ease on [0, 1] (zero velocity and acceleration at both ends), so blends add little jerk."""
+    s = np.clip(s, 0.0, 1.0)
+    return s * s * s * (s * (6.0 * s - 15.0) + 10.0)

@@ -14,11 +14,12 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial.transform import Rotation, Slerp
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.motion.contact import ContactThresholds, label_contacts
+from rd_pipeline.motion.contact import ContactThresholds, contact_runs, label_contacts
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.frames import frame_from_axes, yaw_and_pitch, yaw_pitch_frame
-from rd_pipeline.retarget.settings import TargetShaping
-from rd_pipeline.retarget.smoothing import smooth_cover
+from rd_pipeline.retarget.body_contact import hold_in_contact, label_body_contacts
+from rd_pipeline.retarget.settings import BodyContactSettings, TargetShaping
+from rd_pipeline.retarget.smoothing import smooth_cover, smoothstep
 from rd_pipeline.robots import Robot
 
 # LAFAN1 joints that define frames; the robot side uses whichever bodies the config maps to them.
@@ -48,6 +49,8 @@ class RetargetTargets:
     """Body -> (T, 3, 3) target orientations (pelvis, torso, feet)."""
     foot_contact: np.ndarray
     """(T, 2) left/right foot planted, from the human feet."""
+    body_contact: np.ndarray
+    """(T, K) which key bodies (other than the feet) rest on the floor, from the human joints."""
     human_scale: float
     """Global human-to-robot scale (leg-length ratio) applied to the root."""
     human_pelvis: np.ndarray
@@ -60,7 +63,7 @@ class RetargetTargets:
     def save(self, path) -> None:
         """Keypoint targets for viewing beside the robot (the orientations are not needed there)."""
         np.savez(path, fps=self.fps, bodies=np.array(self.bodies), human_joints=np.array(self.human_joints),
-                 positions=self.positions, foot_contact=self.foot_contact, human_pelvis=self.human_pelvis)
+                 positions=self.positions, foot_contact=self.foot_contact, body_contact=self.body_contact, human_pelvis=self.human_pelvis)
 
 
 def resample_human(human: HumanMotion, fps: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -98,7 +101,7 @@ def robot_rest_rotation(robot: Robot, body: str) -> np.ndarray:
 
 def build_targets(
     human: HumanMotion, robot: Robot, fps: float, foot_vertices: tuple[np.ndarray, np.ndarray], contact: ContactThresholds,
-    shape: TargetShaping = TargetShaping(),
+    shape: TargetShaping = TargetShaping(), body_contact: BodyContactSettings = BodyContactSettings(),
 ) -> RetargetTargets:
     config = robot.config
     sole_height = np.array([-vertices[:, 2].min() for vertices in foot_vertices])
@@ -157,16 +160,21 @@ def build_targets(
         position, rotation = _plant_foot(
             targets[foot], forward, human_rot[:, index[foot]], contact[:, side], foot_vertices[side], fps,
             shape.swing_clearance_m, shape.swing_lift_time_s, pelvis_yaw, _leg_yaw_range(robot, body_for[foot]),
+            shape.planted_tilt_rad,
         )
         targets[foot] = position
         offset = robot_rest_rotation(robot, body_for[foot])
         orientations[body_for[foot]] = rotation @ offset
 
     _keep_legs_reachable(targets, rest, fps, shape.reach_fraction)
+    resting = label_body_contacts(human_pos, index, joints, fps, body_contact)
+    for k, joint in enumerate(joints):
+        if resting[:, k].any():
+            targets[joint] = hold_in_contact(targets[joint], resting[:, k], fps, body_contact.release_s)
     return RetargetTargets(
         fps=fps, bodies=tuple(bodies), human_joints=tuple(joints),
         positions=np.stack([targets[j] for j in joints], axis=1), orientations=orientations,
-        foot_contact=contact, human_scale=root_scale, human_pelvis=human_pos[:, index[PELVIS]] * root_scale,
+        foot_contact=contact, body_contact=resting, human_scale=root_scale, human_pelvis=human_pos[:, index[PELVIS]] * root_scale,
     )
 
 
@@ -265,6 +273,7 @@ def _orientations(
 def _plant_foot(
     free: np.ndarray, forward: np.ndarray, human_rotation: np.ndarray, contact: np.ndarray, sole_vertices: np.ndarray,
     fps: float, clearance: float, lift_time_s: float, pelvis_yaw: np.ndarray, yaw_range: tuple[float, float],
+    tilt_limit: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Foot targets: fixed and flat while planted; in swing, the human path bent to meet the plants.
 
@@ -278,7 +287,7 @@ def _plant_foot(
     planted_weight = np.zeros(n)
     lift = np.zeros(n)
     anchors = []
-    for start, end in _runs(contact):
+    for start, end in contact_runs(contact):
         anchors.append((start, end, np.array([*free[start, :2], sole])))
         position[start:end] = anchors[-1][2]
         # A planted foot keeps one heading, within what the leg's vertical-axis joints can turn from
@@ -291,6 +300,12 @@ def _plant_foot(
     calibration = contact if contact.any() else np.ones(n, dtype=bool)
     offset = (human[calibration].inv() * flat[calibration]).mean()
     swinging = human * offset
+    # A foot planted on its toes or its instep (kneeling, crouching) keeps the human's tilt: laying
+    # it flat would lift the knees off the floor.
+    tilt = np.arccos(np.clip(swinging.as_matrix()[:, 2, 2], -1.0, 1.0))
+    for start, end, _ in anchors:
+        if np.mean(tilt[start:end]) > tilt_limit:
+            flat = _assign(flat, slice(start, end), swinging[start:end])
     # Swing: add a correction that blends from the previous plant's offset to the next one's, so
     # the foot leaves and lands exactly where it is planted. A robot foot near the floor must not
     # slide: it first rises to `clearance`, then travels, then comes down on its plant.
@@ -316,10 +331,10 @@ def _plant_foot(
         lo, hi = (a - 1 if i > 0 else a), (b if i < len(anchors) else b - 1)
         warp = lo + (hi - lo) * np.clip((t - lo - hold) / max(hi - lo - 2 * hold, 1), 0.0, 1.0)
         path = np.stack([np.interp(warp, np.arange(n), free[:, k]) for k in range(3)], axis=1)
-        s = _smoothstep(np.clip((warp - lo) / max(hi - lo, 1), 0.0, 1.0))
+        s = smoothstep(np.clip((warp - lo) / max(hi - lo, 1), 0.0, 1.0))
         position[a:b] = path + (1.0 - s)[:, None] * before + s[:, None] * after
-        lift[a:b] = clearance * _smoothstep(np.clip(np.minimum(since, until) / rise, 0.0, 1.0))
-        planted_weight[a:b] = 1.0 - _smoothstep(np.clip(np.minimum(since, until) / ramp, 0.0, 1.0))
+        lift[a:b] = clearance * smoothstep(np.clip(np.minimum(since, until) / rise, 0.0, 1.0))
+        planted_weight[a:b] = 1.0 - smoothstep(np.clip(np.minimum(since, until) / ramp, 0.0, 1.0))
         # Near a plant, ease toward that plant's flat orientation.
         nearest = np.where(since <= until, a - 1, b) if 0 < i < len(anchors) else np.full(b - a, a - 1 if i > 0 else b)
         flat_near = flat[np.clip(nearest, 0, n - 1)]
@@ -363,15 +378,3 @@ def _assign(rotations: Rotation, where: slice, values: Rotation) -> Rotation:
     quats = rotations.as_quat()
     quats[where] = values.as_quat()
     return Rotation.from_quat(quats)
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """[start, end) of each run of True."""
-    padded = np.concatenate([[False], mask, [False]]).astype(np.int8)
-    edges = np.flatnonzero(np.diff(padded))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
-
-
-def _smoothstep(s: np.ndarray) -> np.ndarray:
-    """Quintic ease (zero velocity and acceleration at both ends), so blends add little jerk."""
-    return s * s * s * (s * (6.0 * s - 15.0) + 10.0)
