@@ -37,7 +37,14 @@ def _inputs(robot: str | None, motion: str) -> dict[str, Path]:
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
-    from rd_pipeline.evaluation.retarget_quality import QUALITY_FILE, retarget_quality
+    import numpy as np
+
+    from rd_pipeline.evaluation.retarget_quality import (
+        QUALITY_FILE,
+        QUALITY_SERIES_FILE,
+        quality_series,
+        summarize_quality,
+    )
     from rd_pipeline.motion.reference import REFERENCE_FILE
     from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
     from rd_pipeline.robots import load_robot
@@ -49,8 +56,11 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         ctx.console.print(f"  dataset joints not in the {ctx.robot} model, dropped: {', '.join(result.dropped_joints)}")
     reference = result.reference
     reference.save(ctx.out_dir / REFERENCE_FILE)
-    # The same ruler as the retarget stage, so the dataset and our retargeting share one table.
-    quality = retarget_quality(robot, reference)
+    # The same ruler as the retarget stage, so the dataset and our retargeting share one table
+    # (no human here: keypoint and pelvis-height rulers need the scaled human, `bench/retarget.py`).
+    series = quality_series(robot, reference)
+    np.savez(ctx.out_dir / QUALITY_SERIES_FILE, **series)
+    quality = summarize_quality(robot, reference, series)
     (ctx.out_dir / QUALITY_FILE).write_text(json.dumps(quality, indent=2) + "\n")
     return {
         **quality,
@@ -64,7 +74,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="import",
-    version=1,
+    version=2,
     description="LAFAN1_Retargeting_Dataset CSV -> robot reference motion at 50 Hz",
     params=ImportParams,
     provides="reference",

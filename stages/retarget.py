@@ -32,7 +32,14 @@ class RetargetParams:
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
-    from rd_pipeline.evaluation.retarget_quality import QUALITY_FILE, retarget_quality
+    import numpy as np
+
+    from rd_pipeline.evaluation.retarget_quality import (
+        QUALITY_FILE,
+        QUALITY_SERIES_FILE,
+        quality_series,
+        summarize_quality,
+    )
     from rd_pipeline.motion.human import HUMAN_MOTION_FILE, HumanMotion
     from rd_pipeline.motion.reference import REFERENCE_FILE
     from rd_pipeline.retarget.retarget import retarget
@@ -49,10 +56,9 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     reference, targets = result.reference, result.targets
     reference.save(ctx.out_dir / REFERENCE_FILE)
     targets.save(ctx.out_dir / TARGETS_FILE)
-    quality = retarget_quality(
-        robot, reference, keypoint_targets=targets.positions, keypoint_bodies=targets.bodies,
-        frames_per_s=reference.n_frames / seconds,
-    )
+    series = quality_series(robot, reference, targets.positions, targets.bodies, targets.human_pelvis)
+    np.savez(ctx.out_dir / QUALITY_SERIES_FILE, **series)
+    quality = summarize_quality(robot, reference, series, frames_per_s=reference.n_frames / seconds)
     (ctx.out_dir / QUALITY_FILE).write_text(json.dumps(quality, indent=2) + "\n")
     return {
         **quality,
@@ -61,12 +67,13 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         "human_scale": round(targets.human_scale, 4),
         "ground_lift_max_mm": round(1000 * result.ground_lift_max_m, 2),
         "contact_fraction": [round(float(x), 4) for x in reference.foot_contact.mean(axis=0)],
+        "body_contact_fraction": round(float(targets.body_contact.any(axis=1).mean()), 4),
     }
 
 
 STAGE = Stage(
     name="retarget",
-    version=1,
+    version=2,
     description="human motion -> robot reference motion at 50 Hz (mink IK) + quality.json",
     params=RetargetParams,
     provides="reference",

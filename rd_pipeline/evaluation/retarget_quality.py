@@ -22,6 +22,8 @@ from rd_pipeline.robots.model import collision_geoms
 
 QUALITY_FILE = "quality.json"
 """File name of a quality report inside an artifact (retarget and import stages)."""
+QUALITY_SERIES_FILE = "quality_frames.npz"
+"""File name of the per-frame rulers (`quality_series`) inside an artifact, plotted by `view`."""
 
 
 @dataclass(frozen=True)
@@ -144,6 +146,17 @@ def retarget_quality(
     0.0 when no foot ever comes within the contact height: a clip that never stands cannot skate.
     """
     series = quality_series(robot, reference, keypoint_targets, keypoint_bodies, human_pelvis)
+    return summarize_quality(robot, reference, series, thresholds, frames_per_s)
+
+
+def summarize_quality(
+    robot: Robot,
+    reference: ReferenceMotion,
+    series: dict[str, np.ndarray],
+    thresholds: QualityThresholds = QualityThresholds(),
+    frames_per_s: float | None = None,
+) -> dict[str, float | int | str | None]:
+    """`retarget_quality` from per-frame rulers already computed by `quality_series`."""
     dt = 1.0 / reference.fps
     feet = FootMeshes.from_robot(robot).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
     feet_penetration = np.maximum(0.0, -feet).max(axis=1)

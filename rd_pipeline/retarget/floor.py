@@ -24,33 +24,41 @@ class FloorLimit(mink.Limit):
         self.detection = detection_m
         self.relaxed = False
         self.body_ids = hulls.body_ids
-        self.points = np.concatenate(hulls.points)
-        self.radii = np.concatenate(hulls.radii)
-        self.owner = np.concatenate([np.full(len(p), k) for k, p in enumerate(hulls.points)])
-        self.starts = np.concatenate([[0], np.cumsum([len(p) for p in hulls.points])[:-1]])
+        self.points = hulls.points
+        self.radii = hulls.radii
+        # No point of a body is farther from its origin than this: bodies whose origin is higher
+        # above the floor need no closer look.
+        self.reach = np.array([np.max(np.linalg.norm(p, axis=1) + r) for p, r in zip(hulls.points, hulls.radii)])
         self.jacobian = np.zeros((3, model.nv))
 
-    def lowest_points(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
-        """Per body: the world z of its lowest support point (radius included) and that point's index."""
-        bodies = self.body_ids[self.owner]
-        z_rows = data.xmat[bodies, 6:9]
-        z = data.xpos[bodies, 2] + np.einsum("vi,vi->v", z_rows, self.points) - self.radii
-        lowest = np.minimum.reduceat(z, self.starts)
-        index = np.array([start + np.argmin(z[start:end]) for start, end in zip(self.starts, [*self.starts[1:], len(z)])])
+    def lowest_points(self, data: mujoco.MjData, within_m: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
+        """Per body: the world z of its lowest support point (radius included) and that point's index.
+
+        Bodies that cannot come within `within_m` of the floor report their origin's height bound
+        and index -1.
+        """
+        origin_z = data.xpos[self.body_ids, 2]
+        lowest = origin_z - self.reach
+        index = np.full(len(self.body_ids), -1)
+        for k in np.flatnonzero(lowest < within_m):
+            z_row = data.xmat[self.body_ids[k], 6:9]
+            z = origin_z[k] + self.points[k] @ z_row - self.radii[k]
+            index[k] = int(np.argmin(z))
+            lowest[k] = z[index[k]]
         return lowest, index
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt  # a bound on the displacement itself
         data = configuration.data
-        lowest, index = self.lowest_points(data)
-        near = np.flatnonzero(lowest < self.clearance + self.detection)
+        lowest, index = self.lowest_points(data, self.clearance + self.detection)
+        near = np.flatnonzero((lowest < self.clearance + self.detection) & (index >= 0))
         if len(near) == 0:
             return mink.Constraint()
         rows = np.empty((len(near), self.model.nv))
         h = np.empty(len(near))
         for row, k in enumerate(near):
             body = int(self.body_ids[k])
-            point = data.xpos[body] + data.xmat[body].reshape(3, 3) @ self.points[index[k]]
+            point = data.xpos[body] + data.xmat[body].reshape(3, 3) @ self.points[k][index[k]]
             mujoco.mj_jac(self.model, data, self.jacobian, None, point, body)
             rows[row] = -self.jacobian[2]
             h[row] = lowest[k] - self.clearance

@@ -23,7 +23,9 @@ from rd_pipeline.robots.model import collision_geoms
 class RetargetIk:
     """One mink problem reused for every frame."""
 
-    def __init__(self, robot: Robot, targets: RetargetTargets, weights: IkWeights, settings: IkSettings) -> None:
+    def __init__(
+        self, robot: Robot, targets: RetargetTargets, weights: IkWeights, settings: IkSettings, hulls: BodyHulls,
+    ) -> None:
         self.robot, self.targets, self.settings = robot, targets, settings
         model = robot.model
         self.configuration = mink.Configuration(model)
@@ -55,11 +57,14 @@ class RetargetIk:
             config.velocity_limit * frame_period * settings.velocity_margin,
         )
         self.root_steps = _root_step_budget(targets, config.root_body, settings)
-        self.floor = FloorLimit(model, BodyHulls.from_robot(robot), settings.floor_clearance_m, settings.floor_detection_m)
+        self.floor = FloorLimit(model, hulls, settings.floor_clearance_m, settings.floor_detection_m)
         pairs = [
             (collision_geoms(model, robot.body_ids[a]), collision_geoms(model, robot.body_ids[b]))
             for a, b in config.collision_pairs
         ]
+        self.collision_pairs = np.array([(a, b) for first, second in pairs for a in first for b in second], dtype=int)
+        self.collision_pairs = self.collision_pairs.reshape(-1, 2)
+        self.pair_reach = model.geom_rbound[self.collision_pairs].sum(axis=1)
         self.limits: list[mink.Limit] = [self.step_limit, self.floor]
         if pairs:
             self.limits.append(mink.CollisionAvoidanceLimit(
@@ -90,9 +95,10 @@ class RetargetIk:
 
     def _set_frame_targets(self, t: int) -> None:
         targets = self.targets
-        for k, task in enumerate(self.frame_tasks):
-            resting = targets.body_contact[t, k]
-            task.set_position_cost(self.contact_cost if resting else self.position_costs[k])
+        if t == 0 or np.any(targets.body_contact[t] != targets.body_contact[t - 1]):
+            for k, task in enumerate(self.frame_tasks):
+                resting = targets.body_contact[t, k]
+                task.set_position_cost(self.contact_cost if resting else self.position_costs[k])
         for task, body in zip(self.frame_tasks, targets.bodies):
             rotation = targets.orientations.get(body)
             so3 = mink.SO3.from_matrix(rotation[t]) if rotation is not None else mink.SO3.identity()
@@ -131,9 +137,33 @@ class RetargetIk:
         return self._keypoint_error(t) > float(np.median(recent)) + self.settings.catch_up_margin_m
 
     def _iterate(self, tasks: list) -> None:
+        """One solver step, shortened while it would push a configured body pair into contact.
+
+        The collision limit is linear in the closest points' normal; a large step that turns
+        interlocking meshes (crossing knees) can still pass through, so the step is checked.
+        """
+        start = self.configuration.q.copy()
         velocity = self._step(tasks)
-        self.configuration.integrate_inplace(velocity, 1.0)
+        for _ in range(self.settings.step_halvings):
+            self.configuration.integrate_inplace(velocity, 1.0)
+            if not self._pairs_touch():
+                break
+            self.configuration.update(start)
+            velocity = 0.5 * velocity
+        else:
+            velocity = np.zeros_like(velocity)
         self.step_limit.spend_root_step(velocity[:6])
+
+    def _pairs_touch(self) -> bool:
+        data = self.configuration.data
+        pairs = self.collision_pairs
+        if len(pairs) == 0:
+            return False
+        gap = np.linalg.norm(data.geom_xpos[pairs[:, 0]] - data.geom_xpos[pairs[:, 1]], axis=1)
+        candidates = pairs[gap < self.pair_reach]  # bounding spheres overlap
+        return any(
+            mujoco.mj_geomDistance(self.robot.model, data, int(a), int(b), 0.0, None) < 0.0 for a, b in candidates
+        )
 
     def _step(self, tasks: list) -> np.ndarray:
         """One QP step; if climbing back above the floor clearance is infeasible with the frame's
@@ -165,7 +195,8 @@ class RetargetIk:
         recent: deque[float] = deque(maxlen=max(1, int(round(self.settings.catch_up_window_s * targets.fps))))
         for t in frames:
             self._set_frame_targets(t)
-            self.step_limit.start_frame(previous, self.root_steps[t])
+            # The first frame places the robot from its default pose: the root may go anywhere.
+            self.step_limit.start_frame(previous, self.root_steps[t] if previous is not None else np.full(6, np.inf))
             # The first frame starts from the default pose, so it gets more iterations to converge.
             for _ in range(self.settings.iterations if previous is not None else 50):
                 self._iterate(self.tasks)

@@ -31,11 +31,10 @@ class FrameStepLimit(mink.Limit):
     def start_frame(self, previous_q: np.ndarray | None, root_max_step: np.ndarray) -> None:
         """Bounds for the next frame, around the previous frame's joint positions; the floating base
         may move by `root_max_step` (6,) per tangent axis in this frame."""
+        self.root_budget = root_max_step.copy()
         if previous_q is None:
             self.lower, self.upper = self.range_lower.copy(), self.range_upper.copy()
-            self.root_budget = np.full(6, np.inf)
             return
-        self.root_budget = root_max_step.copy()
         joints = previous_q[self.qpos_indices]
         self.lower = np.maximum(self.range_lower, joints - self.max_step)
         self.upper = np.minimum(self.range_upper, joints + self.max_step)

@@ -50,7 +50,8 @@ def retarget(
         raise PipelineError(f"clip of {human.duration_s:.4f} s is shorter than one frame period (1/{fps:g} s)")
     feet = FootMeshes.from_robot(robot)
     targets = build_targets(human, robot, fps, feet.vertices, contact, shape, body_contact)
-    ik = RetargetIk(robot, targets, weights, settings)
+    hulls = BodyHulls.from_robot(robot)
+    ik = RetargetIk(robot, targets, weights, settings, hulls)
     qpos = ik.solve(track(range(targets.n_frames), targets.n_frames))
     if settings.trajectory_smoothing_s > 0:
         smoothed = _smooth_trajectory(robot, qpos, settings.trajectory_smoothing_s * fps)
@@ -63,7 +64,7 @@ def retarget(
         qpos = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames))
     reference = _reference(robot, qpos, targets)
     # The IK keeps every body above the floor; smoothing can still dip a body by a few millimetres.
-    lowest = BodyHulls.from_robot(robot).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
+    lowest = hulls.lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
     lift = smooth_cover(np.maximum(-lowest.min(axis=1), 0.0), fps, 0.05)
     if lift.any():
         qpos[:, 2] += lift

@@ -47,7 +47,7 @@ class BodyContactSettings:
 class IkWeights:
     """Task costs: position in 1/m, orientation in 1/rad. Larger = followed more closely."""
 
-    root_position: float = 5.0
+    root_position: float = 15.0
     """Pelvis position."""
     root_orientation: float = 5.0
     """Pelvis orientation."""
@@ -55,7 +55,7 @@ class IkWeights:
     """Torso orientation."""
     feet_position: float = 100.0
     """Feet position (planted feet must not slide)."""
-    feet_orientation: float = 30.0
+    feet_orientation: float = 10.0
     """Feet orientation (planted feet stay flat)."""
     limb_position: float = 0.5
     """Knees, hips, shoulders, elbows and hands."""
@@ -81,7 +81,7 @@ class IkSettings:
     """Minimum distance kept between configured collision pairs."""
     collision_detection_m: float = 0.15
     """Distance under which a collision pair enters the QP."""
-    root_speed_ratio: float = 1.5
+    root_speed_ratio: float = 1.25
     """The pelvis may move per frame, per axis, this many times as far as its target does ..."""
     root_speed_floor_m_s: float = 0.5
     """... plus this speed (m/s), so it can settle where the target stands still."""
@@ -89,7 +89,7 @@ class IkSettings:
     """The pelvis may turn per frame, per body axis, this many times as far as its target does ..."""
     root_angular_speed_floor_rad_s: float = 2.0
     """... plus this angular speed (rad/s)."""
-    root_speed_window_s: float = 0.25
+    root_speed_window_s: float = 0.15
     """The pelvis target's motion is taken as its fastest within this many seconds either side."""
     catch_up_iterations: int = 8
     """Extra solver iterations a frame may take when it lags its targets ..."""
@@ -97,6 +97,8 @@ class IkSettings:
     """... by this much more than the median keypoint error of the recent frames ..."""
     catch_up_window_s: float = 2.0
     """... over this many seconds."""
+    step_halvings: int = 4
+    """A solver step that brings a configured body pair into contact is halved up to this many times, then dropped."""
     floor_clearance_m: float = 0.002
     """Every collision body keeps at least this height above the floor."""
     floor_detection_m: float = 0.05

@@ -23,7 +23,7 @@ _RIM_POINTS = 24
 
 @dataclass(frozen=True)
 class BodyHulls:
-    """Support points of every body's collision geoms, in the body frame."""
+    """Support points of every body's collision geoms (and the feet's visual meshes), in the body frame."""
 
     body_names: tuple[str, ...]
     """Bodies with collision geometry, in model order."""
@@ -37,9 +37,14 @@ class BodyHulls:
     @classmethod
     def from_robot(cls, robot: Robot) -> BodyHulls:
         model = robot.model
+        feet = {robot.body_ids[b] for b in robot.config.foot_bodies}
         names, ids, points, radii = [], [], [], []
         for body in range(1, model.nbody):
             geoms = collision_geoms(model, body)
+            if body in feet:
+                # The G1 feet collide through sole spheres; the foot mesh around them is what a
+                # viewer sees on the floor, so it must not sink either.
+                geoms = sorted({*geoms, *(g for g in _body_geoms(model, body) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH)})
             if not geoms:
                 continue
             support = [_geom_support(model, g) for g in geoms]
@@ -107,6 +112,10 @@ def _geom_support(model: mujoco.MjModel, geom: int) -> tuple[np.ndarray, np.ndar
         points = np.concatenate([np.column_stack([rim, np.full(_RIM_POINTS, z)]) for z in (-size[1], size[1])])
         return _to_body(model, geom, points), np.zeros(len(points))
     raise ValueError(f"geom {geom} of type {kind} has no lowest-point support")
+
+
+def _body_geoms(model: mujoco.MjModel, body: int) -> list[int]:
+    return [g for g in range(model.ngeom) if model.geom_bodyid[g] == body]
 
 
 def _to_body(model: mujoco.MjModel, geom: int, points: np.ndarray) -> np.ndarray:

@@ -10,7 +10,8 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HUMAN_MOTION_FILE, HumanMotion
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.retarget.targets import TARGETS_FILE
-from rd_pipeline.viz.rerun_view import log_human, log_points, log_robot_meshes, open_recording
+from rd_pipeline.evaluation.retarget_quality import QUALITY_SERIES_FILE
+from rd_pipeline.viz.rerun_view import log_human, log_points, log_robot_meshes, log_series, open_recording
 
 TARGET_COLOR = (220, 60, 60)
 
@@ -38,6 +39,12 @@ def record_motion(robot: str, motion: str, artifact_dirs: dict[str, Path], out: 
             if targets.is_file():
                 with np.load(targets) as data:
                     log_points(rec, f"targets/{stage}", data["positions"], reference.fps, TARGET_COLOR, 0.015)
+            series = path.parent / QUALITY_SERIES_FILE
+            if series.is_file():
+                # The rulers as plots on the same timeline: a bad frame is a spike to click on.
+                with np.load(series) as data:
+                    for name in data.files:
+                        log_series(rec, f"quality/{stage}/{name}", data[name], reference.fps)
             if tracked is not None:
                 log_tracked(rec, model, reference, tracked, SIDE_BY_SIDE_M)
     rec.flush()

@@ -100,6 +100,11 @@ def log_points(rec: rr.RecordingStream, entity: str, positions: np.ndarray, fps:
     rec.log(entity, rr.Points3D.from_fields(colors=[color], radii=[radius]), static=True)
 
 
+def log_series(rec: rr.RecordingStream, entity: str, values: np.ndarray, fps: float) -> None:
+    """A per-frame number as a plot on the motion's timeline (keypoint error, penetration, ...)."""
+    rec.send_columns(entity, indexes=_times(len(values), fps), columns=rr.Scalars.columns(scalars=values))
+
+
 def open_recording(name: str, out: Path | None) -> rr.RecordingStream:
     """A recording that streams to an `.rrd` file (headless), else to a spawned viewer."""
     rec = rr.RecordingStream(application_id="rd_pipeline", recording_id=name)
