@@ -137,16 +137,17 @@ class RetargetIk:
         return self._keypoint_error(t) > float(np.median(recent)) + self.settings.catch_up_margin_m
 
     def _iterate(self, tasks: list) -> None:
-        """One solver step, shortened while it would push a configured body pair into contact.
+        """One solver step, shortened while it would push a configured body pair deeper into contact.
 
         The collision limit is linear in the closest points' normal; a large step that turns
         interlocking meshes (crossing knees) can still pass through, so the step is checked.
         """
         start = self.configuration.q.copy()
+        before = self._pair_depth()
         velocity = self._step(tasks)
         for _ in range(self.settings.step_halvings):
             self.configuration.integrate_inplace(velocity, 1.0)
-            if not self._pairs_touch():
+            if self._pair_depth() <= max(before, self.settings.pair_depth_tolerance_m):
                 break
             self.configuration.update(start)
             velocity = 0.5 * velocity
@@ -154,16 +155,16 @@ class RetargetIk:
             velocity = np.zeros_like(velocity)
         self.step_limit.spend_root_step(velocity[:6])
 
-    def _pairs_touch(self) -> bool:
+    def _pair_depth(self) -> float:
+        """How deep the configured body pairs interpenetrate (m; 0 when none touch)."""
         data = self.configuration.data
         pairs = self.collision_pairs
         if len(pairs) == 0:
-            return False
+            return 0.0
         gap = np.linalg.norm(data.geom_xpos[pairs[:, 0]] - data.geom_xpos[pairs[:, 1]], axis=1)
         candidates = pairs[gap < self.pair_reach]  # bounding spheres overlap
-        return any(
-            mujoco.mj_geomDistance(self.robot.model, data, int(a), int(b), 0.0, None) < 0.0 for a, b in candidates
-        )
+        distances = [mujoco.mj_geomDistance(self.robot.model, data, int(a), int(b), 0.0, None) for a, b in candidates]
+        return max(0.0, -min(distances, default=0.0))
 
     def _step(self, tasks: list) -> np.ndarray:
         """One QP step; if climbing back above the floor clearance is infeasible with the frame's

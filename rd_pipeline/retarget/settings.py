@@ -17,6 +17,8 @@ class TargetShaping:
     """Time a swing foot takes to rise to its clearance before it travels (and to come down after)."""
     reach_fraction: float = 0.97
     """Fraction of the straight-leg length a planted leg may use; beyond it the body is lowered."""
+    min_stance_fraction: float = 0.6
+    """Feet never come sideways closer than this fraction of the robot's rest stance (crossed legs are opened)."""
     planted_tilt_rad: float = 0.35
     """A planted human foot tilted more than this (kneeling, tiptoe) keeps its tilt; flatter ones are laid flat."""
 
@@ -98,7 +100,9 @@ class IkSettings:
     catch_up_window_s: float = 2.0
     """... over this many seconds."""
     step_halvings: int = 4
-    """A solver step that brings a configured body pair into contact is halved up to this many times, then dropped."""
+    """A solver step that pushes a configured body pair deeper into contact is halved up to this many times, then dropped ..."""
+    pair_depth_tolerance_m: float = 0.002
+    """... where contact means deeper than this (touching is allowed: the self-collision ruler counts from 5 mm)."""
     floor_clearance_m: float = 0.002
     """Every collision body keeps at least this height above the floor."""
     floor_detection_m: float = 0.05

@@ -145,6 +145,7 @@ def build_targets(
             targets[joint] = targets[parent] + scale * segment
 
     _match_stance_width(targets, rest, rigid_frame[PELVIS])
+    _keep_feet_apart(targets, rest, rigid_frame[PELVIS], fps, shape.min_stance_fraction)
     contact = _human_contacts(human_pos, index, fps, contact)
     # Lift or lower everything so planted feet sit at the robot's sole height (robot and human
     # ankles are not at the same height in proportion to the legs).
@@ -189,6 +190,24 @@ def _match_stance_width(targets: dict[str, np.ndarray], rest: dict[str, np.ndarr
         lateral = np.einsum("ti,ti->t", pelvis[:, :, 1], targets[foot] - targets[PELVIS])
         robot_lateral = float((rest[foot] - rest[PELVIS])[1])  # rest frames are world-aligned
         shift = (robot_lateral - float(np.median(lateral))) * pelvis[:, :, 1]
+        targets[knee] = targets[knee] + shift
+        targets[foot] = targets[foot] + shift
+
+
+def _keep_feet_apart(
+    targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], pelvis: np.ndarray, fps: float, fraction: float,
+) -> None:
+    """Push the legs apart sideways (pelvis frame) where the feet come closer than `fraction` of the
+    robot's rest stance: a human crosses legs that a robot's thick knees cannot pass.
+
+    The push is a smooth cover of the per-frame deficit, shared by both legs; planting picks it up.
+    """
+    lateral = pelvis[:, :, 1]
+    separation = np.einsum("ti,ti->t", lateral, targets[FEET[0]] - targets[FEET[1]])
+    rest_separation = float((rest[FEET[0]] - rest[FEET[1]])[1])  # rest frames are world-aligned
+    push = smooth_cover(np.maximum(fraction * rest_separation - separation, 0.0), fps, 0.1)
+    for knee, foot, sign in (("LeftLeg", FEET[0], 0.5), ("RightLeg", FEET[1], -0.5)):
+        shift = sign * push[:, None] * lateral
         targets[knee] = targets[knee] + shift
         targets[foot] = targets[foot] + shift
 
