@@ -36,7 +36,10 @@ class RetargetIk:
         self.position_costs: list[float] = []
         for body in targets.bodies:
             if body == config.root_body:
-                cost = (weights.root_position, weights.root_orientation)
+                # Along the pelvis' own up axis the cost is higher: sinking is the cheapest way out of
+                # a conflict between the feet and the legs, and it reads as a collapse.
+                root_position = np.array([weights.root_position, weights.root_position, weights.root_height])
+                cost = (root_position, weights.root_orientation)
             elif body in feet:
                 cost = (weights.feet_position, weights.feet_orientation)
             elif body in oriented:
@@ -145,9 +148,14 @@ class RetargetIk:
         start = self.configuration.q.copy()
         before = self._pair_depth()
         velocity = self._step(tasks)
-        for _ in range(self.settings.step_halvings):
+        for halving in range(self.settings.step_halvings + 1):
             self.configuration.integrate_inplace(velocity, 1.0)
-            if self._pair_depth() <= max(before, self.settings.pair_depth_tolerance_m):
+            depth = self._pair_depth()
+            if depth <= max(before, self.settings.pair_depth_tolerance_m):
+                break
+            # The shortest step is kept while the pair stays shallower than the hard limit: a pose
+            # already touching must still be able to move, or the solve freezes there.
+            if halving == self.settings.step_halvings and depth <= self.settings.pair_depth_limit_m:
                 break
             self.configuration.update(start)
             velocity = 0.5 * velocity

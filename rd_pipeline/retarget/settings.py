@@ -50,7 +50,9 @@ class IkWeights:
     """Task costs: position in 1/m, orientation in 1/rad. Larger = followed more closely."""
 
     root_position: float = 15.0
-    """Pelvis position."""
+    """Pelvis position along its forward and left axes."""
+    root_height: float = 15.0
+    """Pelvis position along its up axis."""
     root_orientation: float = 5.0
     """Pelvis orientation."""
     torso_orientation: float = 3.0
@@ -102,7 +104,9 @@ class IkSettings:
     step_halvings: int = 4
     """A solver step that pushes a configured body pair deeper into contact is halved up to this many times, then dropped ..."""
     pair_depth_tolerance_m: float = 0.002
-    """... where contact means deeper than this (touching is allowed: the self-collision ruler counts from 5 mm)."""
+    """... where contact means deeper than this (touching is allowed: the self-collision ruler counts from 5 mm) ..."""
+    pair_depth_limit_m: float = 0.004
+    """... and the shortest step is still taken while no pair gets deeper than this."""
     floor_clearance_m: float = 0.002
     """Every collision body keeps at least this height above the floor."""
     floor_detection_m: float = 0.05

@@ -197,17 +197,24 @@ def _match_stance_width(targets: dict[str, np.ndarray], rest: dict[str, np.ndarr
 def _keep_feet_apart(
     targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], pelvis: np.ndarray, fps: float, fraction: float,
 ) -> None:
-    """Push the legs apart sideways (pelvis frame) where the feet come closer than `fraction` of the
-    robot's rest stance: a human crosses legs that a robot's thick knees cannot pass.
+    """Push the legs apart where the feet come horizontally closer than `fraction` of the robot's rest
+    stance: a human crosses and passes legs closer than a robot's thick knees and feet can.
 
-    The push is a smooth cover of the per-frame deficit, shared by both legs; planting picks it up.
+    The push is along the line between the feet (sideways when they pass each other, whatever the
+    pelvis does in a turn), a smooth cover of the per-frame deficit shared by both legs; planting
+    picks it up.
     """
-    lateral = pelvis[:, :, 1]
-    separation = np.einsum("ti,ti->t", lateral, targets[FEET[0]] - targets[FEET[1]])
-    rest_separation = float((rest[FEET[0]] - rest[FEET[1]])[1])  # rest frames are world-aligned
-    push = smooth_cover(np.maximum(fraction * rest_separation - separation, 0.0), fps, 0.1)
+    between = (targets[FEET[0]] - targets[FEET[1]])[:, :2]
+    distance = np.linalg.norm(between, axis=1)
+    # Feet exactly on top of each other have no line between them: use the pelvis' left.
+    direction = np.where(distance[:, None] > 1e-6, between / np.maximum(distance, 1e-6)[:, None], pelvis[:, :2, 1])
+    direction = gaussian_filter1d(direction, 0.05 * fps, axis=0, mode="nearest")
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    rest_distance = float(np.linalg.norm((rest[FEET[0]] - rest[FEET[1]])[:2]))
+    push = smooth_cover(np.maximum(fraction * rest_distance - distance, 0.0), fps, 0.1)
     for knee, foot, sign in (("LeftLeg", FEET[0], 0.5), ("RightLeg", FEET[1], -0.5)):
-        shift = sign * push[:, None] * lateral
+        shift = np.zeros_like(targets[foot])
+        shift[:, :2] = sign * push[:, None] * direction
         targets[knee] = targets[knee] + shift
         targets[foot] = targets[foot] + shift
 
@@ -221,8 +228,12 @@ def _keep_legs_reachable(targets: dict[str, np.ndarray], rest: dict[str, np.ndar
     for hip, foot in zip(HIPS_LR, FEET):
         reach = fraction * np.linalg.norm(rest[hip] - rest[foot])  # legs are straight in the rest pose
         delta = targets[hip] - targets[foot]
-        horizontal = np.minimum(np.linalg.norm(delta[:, :2], axis=1), reach)
-        need = np.maximum(need, delta[:, 2] - np.sqrt(reach**2 - horizontal**2))
+        horizontal = np.linalg.norm(delta[:, :2], axis=1)
+        # Lowering only helps a leg that is too long vertically; a leg stretched out along the
+        # floor (sitting, lying) stays out of reach however low the body goes.
+        reachable = horizontal < reach
+        height = np.sqrt(reach**2 - np.minimum(horizontal, reach) ** 2)
+        need = np.maximum(need, np.where(reachable, delta[:, 2] - height, 0.0))
     drop = smooth_cover(np.maximum(need, 0.0), fps, 0.1)
     for joint in targets:
         if joint not in FEET:

@@ -1,0 +1,105 @@
+"""Retargeting takes that go to the floor: floor work, a fall and getting up, and a take that once collapsed.
+
+Each test retargets a short excerpt of a real LAFAN1 take for the G1 and asserts the issue's bars
+with the whole-body ruler: no body through the floor, the pelvis as low as the scaled human's,
+planted feet still, no limit, velocity or self-collision frame, no diverged frame, a root no
+faster than the human's hips, and the robot tilting and getting up when the human does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from conftest import LAFAN_DIR
+from scipy.spatial.transform import Rotation
+
+from rd_pipeline.evaluation.retarget_quality import quality_series, summarize_quality
+from rd_pipeline.motion.bvh import read_bvh
+from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
+from rd_pipeline.retarget.retarget import RetargetResult, retarget
+from rd_pipeline.robots import load_robot
+from stages.retarget import RetargetParams
+
+EXCERPTS = {
+    # take: (start s, end s, what happens)
+    "floor": ("ground2_subject2", 6.0, 26.0),
+    "fall": ("fallAndGetUp3_subject1", 36.0, 50.0),
+    "once_collapsed": ("fallAndGetUp1_subject1", 20.0, 40.0),
+}
+
+
+def _excerpt(motion: str, start_s: float, end_s: float) -> HumanMotion:
+    human = human_motion_from_bvh(read_bvh(LAFAN_DIR / f"{motion}.bvh"), LAFAN_CM_TO_M, LAFAN_TO_Z_UP)
+    frames = slice(int(start_s * human.fps), int(end_s * human.fps))
+    return dataclasses.replace(human, pos_w=human.pos_w[frames], quat_w=human.quat_w[frames])
+
+
+@pytest.fixture(scope="module", params=sorted(EXCERPTS))
+def excerpt(request) -> tuple[str, RetargetResult, dict, dict]:
+    motion, start_s, end_s = EXCERPTS[request.param]
+    p = RetargetParams()
+    robot = load_robot("g1")
+    result = retarget(_excerpt(motion, start_s, end_s), robot, p.fps, p.contact, p.shape, p.body_contact,
+                      p.weights, p.ik)
+    targets = result.targets
+    series = quality_series(robot, result.reference, targets.positions, targets.bodies, targets.human_pelvis)
+    return request.param, result, series, summarize_quality(robot, result.reference, series)
+
+
+def test_the_issue_bars_hold(excerpt) -> None:
+    name, _, _, quality = excerpt
+    assert quality["penetration_max_mm"] <= 10.0, name
+    assert quality["pelvis_height_dev_p95_m"] <= 0.10, name
+    assert quality["skate_stance_mean_mm_s"] <= 20.0, name
+    assert quality["joint_limit_violations"] == 0, name
+    assert quality["velocity_limit_violations"] == 0, name
+    assert quality["self_collision_frames"] == 0, name
+    assert quality["diverged_frames"] == 0, name
+
+
+def test_root_is_no_faster_than_the_human(excerpt) -> None:
+    name, _, _, quality = excerpt
+    assert quality["root_speed_p999_m_s"] <= 1.6 * quality["human_root_speed_p999_m_s"], name
+
+
+def test_low_human_low_robot(excerpt) -> None:
+    """Where the scaled human hips are within 0.3 m of the floor, the robot pelvis is too (no floating)."""
+    name, result, _, _ = excerpt
+    human_z = result.targets.human_pelvis[:, 2]
+    pelvis = result.reference.body_names.index("pelvis")
+    robot_z = result.reference.body_pos_w[:, pelvis, 2]
+    low = human_z < 0.3
+    assert low.sum() > 50, f"{name}: the excerpt should reach the floor"
+    assert np.percentile(robot_z[low] - human_z[low], 95) < 0.15, name
+    assert robot_z.min() > 0.0, name
+
+
+def test_robot_tilts_and_rises_with_the_human(excerpt) -> None:
+    """The pelvis follows the human's tilt (lying, on all fours) and stands again when the human does."""
+    name, result, _, _ = excerpt
+    reference = result.reference
+    pelvis = reference.body_names.index("pelvis")
+    robot_up = Rotation.from_quat(reference.body_quat_w[:, pelvis][:, [1, 2, 3, 0]]).apply([0.0, 0.0, 1.0])
+    human_up = result.targets.orientations["pelvis"][:, :, 2]
+    human_tilt = np.degrees(np.arccos(np.clip(human_up[:, 2], -1.0, 1.0)))
+    robot_tilt = np.degrees(np.arccos(np.clip(robot_up[:, 2], -1.0, 1.0)))
+    assert human_tilt.max() > 60.0, f"{name}: the excerpt should tilt the pelvis"
+    assert np.percentile(np.abs(robot_tilt - human_tilt), 95) < 30.0, name
+    # Upside down (pelvis up pointing below the horizon) only where the human is too.
+    assert not np.any((robot_up[:, 2] < -0.2) & (human_up[:, 2] > 0.2)), name
+    standing_again = result.targets.human_pelvis[-25:, 2] > 0.5
+    if standing_again.all():
+        assert reference.body_pos_w[-25:, pelvis, 2].min() > 0.5, name
+
+
+def test_body_contacts_are_labelled_and_held(excerpt) -> None:
+    """Knees, hands or trunk rest on the floor in every excerpt; while resting they stay near the floor."""
+    name, result, series, _ = excerpt
+    targets = result.targets
+    assert targets.body_contact.any(), name
+    index = [result.reference.body_names.index(b) for b in targets.bodies]
+    heights = result.reference.body_pos_w[:, index, 2]
+    assert np.percentile(heights[targets.body_contact], 90) < 0.2, name
+    assert series["penetration_m"].max() <= 0.010, name
