@@ -30,6 +30,11 @@ class FloorLimit(mink.Limit):
         # above the floor need no closer look.
         self.reach = np.array([np.max(np.linalg.norm(p, axis=1) + r) for p, r in zip(hulls.points, hulls.radii)])
         self.jacobian = np.zeros((3, model.nv))
+        self.extra = np.zeros(len(self.body_ids))
+
+    def raise_bodies(self, extra_m: np.ndarray) -> None:
+        """Per body, clearance beyond the floor's for the next solves (a swinging foot's lift)."""
+        self.extra = extra_m
 
     def lowest_points(self, data: mujoco.MjData, within_m: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
         """Per body: the world z of its lowest support point (radius included) and that point's index.
@@ -50,8 +55,9 @@ class FloorLimit(mink.Limit):
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt  # a bound on the displacement itself
         data = configuration.data
-        lowest, index = self.lowest_points(data, self.clearance + self.detection)
-        near = np.flatnonzero((lowest < self.clearance + self.detection) & (index >= 0))
+        clearance = self.clearance + self.extra
+        lowest, index = self.lowest_points(data, float(clearance.max()) + self.detection)
+        near = np.flatnonzero((lowest < clearance + self.detection) & (index >= 0))
         if len(near) == 0:
             return mink.Constraint()
         rows = np.empty((len(near), self.model.nv))
@@ -61,7 +67,7 @@ class FloorLimit(mink.Limit):
             point = data.xpos[body] + data.xmat[body].reshape(3, 3) @ self.points[k][index[k]]
             mujoco.mj_jac(self.model, data, self.jacobian, None, point, body)
             rows[row] = -self.jacobian[2]
-            h[row] = lowest[k] - self.clearance
+            h[row] = lowest[k] - clearance[k]
         if self.relaxed:
             h = np.maximum(h, 0.0)
         return mink.Constraint(G=rows, h=h)

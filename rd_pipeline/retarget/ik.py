@@ -33,23 +33,19 @@ class RetargetIk:
         oriented = set(targets.orientations)
         feet = set(config.foot_bodies)
         self.frame_tasks: list[mink.FrameTask] = []
-        self.position_costs: list[float] = []
         for body in targets.bodies:
             if body == config.root_body:
-                # Along the pelvis' own up axis the cost is higher: sinking is the cheapest way out of
-                # a conflict between the feet and the legs, and it reads as a collapse.
-                root_position = np.array([weights.root_position, weights.root_position, weights.root_height])
-                cost = (root_position, weights.root_orientation)
+                orientation_cost = weights.root_orientation
             elif body in feet:
-                cost = (weights.feet_position, weights.feet_orientation)
+                orientation_cost = weights.feet_orientation
             elif body in oriented:
-                cost = (weights.limb_position, weights.torso_orientation)
+                orientation_cost = weights.torso_orientation
             else:
-                cost = (weights.limb_position, 0.0)
-            self.position_costs.append(cost[0])
+                orientation_cost = 0.0
             self.frame_tasks.append(mink.FrameTask(
-                body, "body", position_cost=cost[0], orientation_cost=cost[1], lm_damping=settings.lm_damping,
+                body, "body", position_cost=1.0, orientation_cost=orientation_cost, lm_damping=settings.lm_damping,
             ))
+        self.position_costs = _position_cost_schedule(targets, config, weights)
         self.posture = mink.PostureTask(model, cost=weights.posture)
         q_default = self.configuration.q.copy()
         q_default[robot.qpos_indices] = config.default_pos
@@ -61,6 +57,10 @@ class RetargetIk:
         )
         self.root_steps = _root_step_budget(targets, config.root_body, settings)
         self.floor = FloorLimit(model, hulls, settings.floor_clearance_m, settings.floor_detection_m)
+        # A swinging foot keeps part of its target's lift as a hard clearance: skimming the floor
+        # with a pointed toe reads as dragging, whatever the foot's position error.
+        self.foot_lift_columns = [list(hulls.body_names).index(b) for b in config.foot_bodies]
+        self.foot_clearance = settings.swing_floor_fraction * targets.foot_lift
         pairs = [
             (collision_geoms(model, robot.body_ids[a]), collision_geoms(model, robot.body_ids[b]))
             for a, b in config.collision_pairs
@@ -76,7 +76,6 @@ class RetargetIk:
             ))
         self.tasks = [*self.frame_tasks, self.posture]
         self.damping = weights.damping
-        self.contact_cost = weights.contact_position
         self.key_body_ids = np.array([robot.body_ids[b] for b in targets.bodies])
 
     def initial_configuration(self) -> np.ndarray:
@@ -98,10 +97,13 @@ class RetargetIk:
 
     def _set_frame_targets(self, t: int) -> None:
         targets = self.targets
-        if t == 0 or np.any(targets.body_contact[t] != targets.body_contact[t - 1]):
-            for k, task in enumerate(self.frame_tasks):
-                resting = targets.body_contact[t, k]
-                task.set_position_cost(self.contact_cost if resting else self.position_costs[k])
+        extra = np.zeros(len(self.floor.body_ids))
+        extra[self.foot_lift_columns] = self.foot_clearance[t]
+        self.floor.raise_bodies(extra)
+        costs = self.position_costs
+        if t == 0 or np.any(costs[t] != costs[t - 1]):
+            for task, cost in zip(self.frame_tasks, costs[t]):
+                task.set_position_cost(cost)
         for task, body in zip(self.frame_tasks, targets.bodies):
             rotation = targets.orientations.get(body)
             so3 = mink.SO3.from_matrix(rotation[t]) if rotation is not None else mink.SO3.identity()
@@ -240,3 +242,30 @@ def _root_step_budget(targets: RetargetTargets, root_body: str, settings: IkSett
     angular = maximum_filter1d(np.concatenate([angular[:1], angular]), window, axis=0)
     steps[:, 3:] = settings.root_angular_speed_ratio * angular + settings.root_angular_speed_floor_rad_s * period
     return steps
+
+
+def _position_cost_schedule(targets: RetargetTargets, config, weights: IkWeights) -> np.ndarray:
+    """(T, K, 3) position cost of each key body per frame, along its own axes.
+
+    Planted feet must not slide; swinging feet only guide the leg sideways, so the body follows the
+    pelvis rather than a foot it cannot reach. Bodies resting on the floor are held like planted feet.
+    Along the pelvis' own up axis the cost is higher: sinking is the cheapest way out of a conflict
+    between the feet and the legs, and it reads as a collapse.
+    """
+    n_frames = targets.n_frames
+    costs = np.full((n_frames, len(targets.bodies), 3), weights.limb_position)
+    costs[targets.body_contact] = weights.contact_position
+    root = targets.bodies.index(config.root_body)
+    costs[:, root] = [weights.root_position, weights.root_position, weights.root_height]
+    costs[targets.body_contact[:, root], root] = np.maximum(costs[targets.body_contact[:, root], root], weights.contact_position)
+    for side, foot in enumerate(config.foot_bodies):
+        k = targets.bodies.index(foot)
+        # A swinging foot near the floor must not slide either: the full cost until it is lifted.
+        height = targets.positions[:, k, 2] - np.min(targets.positions[:, k, 2])
+        lifted = np.clip(height / weights.swing_lift_height_m, 0.0, 1.0)
+        swing = weights.feet_position + lifted * (weights.swing_feet_position - weights.feet_position)
+        costs[:, k, :2] = np.where(targets.foot_contact[:, side], weights.feet_position, swing)[:, None]
+        # Along its own up axis a swinging foot keeps the planted cost: it clears the floor as its
+        # target does instead of dragging along it.
+        costs[:, k, 2] = weights.feet_position
+    return costs

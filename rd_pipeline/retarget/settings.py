@@ -51,14 +51,18 @@ class IkWeights:
 
     root_position: float = 15.0
     """Pelvis position along its forward and left axes."""
-    root_height: float = 15.0
+    root_height: float = 50.0
     """Pelvis position along its up axis."""
     root_orientation: float = 5.0
     """Pelvis orientation."""
     torso_orientation: float = 3.0
     """Torso orientation."""
     feet_position: float = 100.0
-    """Feet position (planted feet must not slide)."""
+    """Planted feet position (they must not slide)."""
+    swing_feet_position: float = 20.0
+    """Swinging feet position, once lifted (they guide the leg; the body follows the pelvis) ..."""
+    swing_lift_height_m: float = 0.1
+    """... reached over this height above the foot's lowest target; below, the planted cost."""
     feet_orientation: float = 10.0
     """Feet orientation (planted feet stay flat)."""
     limb_position: float = 0.5
@@ -81,7 +85,7 @@ class IkSettings:
     """QP solver name (qpsolvers)."""
     velocity_margin: float = 0.95
     """Fraction of each joint's velocity limit a frame step may use."""
-    collision_margin_m: float = 0.02
+    collision_margin_m: float = 0.008
     """Minimum distance kept between configured collision pairs."""
     collision_detection_m: float = 0.15
     """Distance under which a collision pair enters the QP."""
@@ -109,6 +113,8 @@ class IkSettings:
     """... and the shortest step is still taken while no pair gets deeper than this."""
     floor_clearance_m: float = 0.002
     """Every collision body keeps at least this height above the floor."""
+    swing_floor_fraction: float = 0.75
+    """A swinging foot's lowest point stays above this fraction of its target's lift (hard)."""
     floor_detection_m: float = 0.05
     """Bodies closer to the floor than this (beyond the clearance) enter the QP."""
     trajectory_smoothing_s: float = 0.03

@@ -49,6 +49,8 @@ class RetargetTargets:
     """Body -> (T, 3, 3) target orientations (pelvis, torso, feet)."""
     foot_contact: np.ndarray
     """(T, 2) left/right foot planted, from the human feet."""
+    foot_lift: np.ndarray
+    """(T, 2) height the left/right sole target clears the floor by (0 planted, the swing clearance mid-swing)."""
     body_contact: np.ndarray
     """(T, K) which key bodies (other than the feet) rest on the floor, from the human joints."""
     human_scale: float
@@ -156,9 +158,10 @@ def build_targets(
         targets[joint] = targets[joint] + np.array([0.0, 0.0, shift])
 
     pelvis_yaw = np.unwrap(yaw_and_pitch(orientations[body_for[PELVIS]][:, :, 0])[0])
+    foot_lift = np.zeros((human_pos.shape[0], 2))
     for side, (foot, toe) in enumerate(zip(FEET, TOES)):
         forward = human_pos[:, index[toe]] - human_pos[:, index[foot]]
-        position, rotation = _plant_foot(
+        position, rotation, foot_lift[:, side] = _plant_foot(
             targets[foot], forward, human_rot[:, index[foot]], contact[:, side], foot_vertices[side], fps,
             shape.swing_clearance_m, shape.swing_lift_time_s, pelvis_yaw, _leg_yaw_range(robot, body_for[foot]),
             shape.planted_tilt_rad,
@@ -175,7 +178,7 @@ def build_targets(
     return RetargetTargets(
         fps=fps, bodies=tuple(bodies), human_joints=tuple(joints),
         positions=np.stack([targets[j] for j in joints], axis=1), orientations=orientations,
-        foot_contact=contact, body_contact=resting, human_scale=root_scale, human_pelvis=human_pos[:, index[PELVIS]] * root_scale,
+        foot_contact=contact, foot_lift=foot_lift, body_contact=resting, human_scale=root_scale, human_pelvis=human_pos[:, index[PELVIS]] * root_scale,
     )
 
 
@@ -304,8 +307,9 @@ def _plant_foot(
     free: np.ndarray, forward: np.ndarray, human_rotation: np.ndarray, contact: np.ndarray, sole_vertices: np.ndarray,
     fps: float, clearance: float, lift_time_s: float, pelvis_yaw: np.ndarray, yaw_range: tuple[float, float],
     tilt_limit: float,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Foot targets: fixed and flat while planted; in swing, the human path bent to meet the plants.
+    Returns positions, rotations and the height the sole clears the floor by (0 while planted).
 
     Swing orientation follows the human foot joint (its toe line is useless as a heading when the
     foot points down), through the constant offset that makes it flat and aligned during plants.
@@ -376,7 +380,7 @@ def _plant_foot(
     # near the floor would otherwise drag along it.
     depth = -np.einsum("tij,vj->tvi", rotation, sole_vertices)[..., 2].min(axis=1)
     position[:, 2] = np.maximum(position[:, 2], lift + depth)
-    return position, rotation
+    return position, rotation, lift
 
 
 def _wrap(angle: float) -> float:
