@@ -20,7 +20,7 @@ class TargetShaping:
     min_stance_fraction: float = 0.6
     """Feet never come sideways closer than this fraction of the robot's rest stance (crossed legs are opened)."""
     planted_tilt_rad: float = 0.35
-    """A planted human foot tilted more than this (kneeling, tiptoe) keeps its tilt; flatter ones are laid flat."""
+    """A planted human foot tilted more than this (kneeling, heel up) takes on the human's tilt, fully at twice it."""
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,7 @@ from rd_pipeline.robots import Robot
 # LAFAN1 joints that define frames; the robot side uses whichever bodies the config maps to them.
 PELVIS, TORSO = "Hips", "Spine2"
 FEET = ("LeftFoot", "RightFoot")
+KNEES = ("LeftLeg", "RightLeg")
 TOES = ("LeftToe", "RightToe")
 HIPS_LR = ("LeftUpLeg", "RightUpLeg")
 SHOULDERS_LR = ("LeftArm", "RightArm")
@@ -239,8 +240,9 @@ def _keep_legs_reachable(targets: dict[str, np.ndarray], rest: dict[str, np.ndar
         need = np.maximum(need, np.where(reachable, delta[:, 2] - height, 0.0))
     drop = smooth_cover(np.maximum(need, 0.0), fps, 0.1)
     for joint in targets:
-        if joint not in FEET:
-            targets[joint] = targets[joint] - drop[:, None] * np.array([0.0, 0.0, 1.0])
+        # A knee sits between a lowered hip and a foot that stays: it comes down about half as far.
+        share = 0.0 if joint in FEET else 0.5 if joint in KNEES else 1.0
+        targets[joint] = targets[joint] - share * drop[:, None] * np.array([0.0, 0.0, 1.0])
 
 
 def _mapped_ancestor(human: HumanMotion, joint: str, mapped: set[str]) -> str | None:
@@ -337,9 +339,12 @@ def _plant_foot(
     # A foot planted on its toes or its instep (kneeling, crouching) keeps the human's tilt: laying
     # it flat would lift the knees off the floor.
     tilt = np.arccos(np.clip(swinging.as_matrix()[:, 2, 2], -1.0, 1.0))
+    tilted = smoothstep((tilt - tilt_limit) / tilt_limit)  # eases in over one more `tilt_limit`
     for start, end, _ in anchors:
-        if np.mean(tilt[start:end]) > tilt_limit:
-            flat = _assign(flat, slice(start, end), swinging[start:end])
+        run = slice(start, end)
+        if tilted[run].any():
+            delta = (flat[run].inv() * swinging[run]).as_rotvec()
+            flat = _assign(flat, run, flat[run] * Rotation.from_rotvec(delta * tilted[run, None]))
     # Swing: add a correction that blends from the previous plant's offset to the next one's, so
     # the foot leaves and lands exactly where it is planted. A robot foot near the floor must not
     # slide: it first rises to `clearance`, then travels, then comes down on its plant.
