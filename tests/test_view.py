@@ -25,6 +25,10 @@ def test_view_human_and_retargeted_robot(artifacts: Path, tmp_path: Path) -> Non
     rows = _rows_per_entity(out)
     assert rows.pop("/human/joints") == 3945 and rows.pop("/human/bones") == 3945
     assert rows.pop("/targets/retarget") == 6575
+    # The rulers as plots on the same timeline.
+    plots = {name: rows.pop(name) for name in list(rows) if name.startswith("/quality/")}
+    rulers = ["penetration_m", "keypoint_error_m", "pelvis_height_dev_m", "root_speed_m_s", "human_root_speed_m_s"]
+    assert plots == {f"/quality/retarget/{name}": 6575 for name in rulers}
     # One moving mesh per G1 body (all 24 have a visual mesh), every frame of the 50 Hz reference.
     assert sorted(rows) == sorted(f"/robot/retarget/{b}" for b in load_robot("g1").body_names)
     assert set(rows.values()) == {6575}
@@ -37,5 +41,7 @@ def test_view_imported_robot_reference(artifacts: Path, tmp_path: Path) -> None:
     result = cli("view", "--robot", "h1", "--motion", "dance2_subject3", "--out", str(out))
     assert result.returncode == 0, result.stderr
     rows = _rows_per_entity(out)
+    plots = {name: rows.pop(name) for name in list(rows) if name.startswith("/quality/")}
+    assert plots == {f"/quality/import/{name}": 11285 for name in ("penetration_m", "root_speed_m_s")}
     assert sorted(rows) == sorted(f"/robot/import/{b}" for b in load_robot("h1").body_names)
     assert set(rows.values()) == {11285}

@@ -44,7 +44,8 @@ def record_motion(robot: str, motion: str, artifact_dirs: dict[str, Path], out: 
                 # The rulers as plots on the same timeline: a bad frame is a spike to click on.
                 with np.load(series) as data:
                     for name in data.files:
-                        log_series(rec, f"quality/{stage}/{name}", data[name], reference.fps)
+                        if name.endswith(("_m", "_m_s")):  # measures, not body indices
+                            log_series(rec, f"quality/{stage}/{name}", data[name], reference.fps)
             if tracked is not None:
                 log_tracked(rec, model, reference, tracked, SIDE_BY_SIDE_M)
     rec.flush()
