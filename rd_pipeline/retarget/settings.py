@@ -117,9 +117,9 @@ class IkSettings:
     """A swinging foot's lowest point stays above this fraction of its target's lift (hard)."""
     floor_detection_m: float = 0.05
     """Bodies closer to the floor than this (beyond the clearance) enter the QP."""
-    trajectory_smoothing_s: float = 0.03
+    trajectory_smoothing_s: float = 0.04
     """Gaussian sigma (s) of the sequence-level smoothing of the solved trajectory (0: none)."""
-    refine_iterations: int = 2
+    refine_iterations: int = 1
     """Iterations per frame of the feet refinement after smoothing."""
     refine_posture_cost: float = 5.0
     """How strongly the refinement holds joints at their smoothed values."""
