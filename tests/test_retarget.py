@@ -14,9 +14,9 @@ from scipy.spatial.transform import Rotation
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.retarget_quality import retarget_quality
 from rd_pipeline.motion.bvh import read_bvh
+from rd_pipeline.motion.contact import contact_runs
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
-from rd_pipeline.motion.contact import contact_runs
 from rd_pipeline.robots import load_robot
 from stages.retarget import RetargetParams
 

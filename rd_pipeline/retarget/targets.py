@@ -16,8 +16,8 @@ from scipy.spatial.transform import Rotation, Slerp
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.contact import ContactThresholds, contact_runs, label_contacts
 from rd_pipeline.motion.human import HumanMotion
-from rd_pipeline.retarget.frames import frame_from_axes, yaw_and_pitch, yaw_pitch_frame
 from rd_pipeline.retarget.body_contact import hold_in_contact, label_body_contacts
+from rd_pipeline.retarget.frames import frame_from_axes, yaw_and_pitch, yaw_pitch_frame
 from rd_pipeline.retarget.settings import BodyContactSettings, TargetShaping
 from rd_pipeline.retarget.smoothing import smooth_cover, smoothstep
 from rd_pipeline.robots import Robot
