@@ -14,22 +14,16 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.spatial.transform import Rotation, Slerp
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.motion.contact import ContactThresholds, contact_runs, label_contacts
+from rd_pipeline.motion.contact import ContactThresholds, label_contacts
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.body_contact import hold_in_contact, label_body_contacts
-from rd_pipeline.retarget.frames import frame_from_axes, yaw_and_pitch, yaw_pitch_frame
+from rd_pipeline.retarget.feet import leg_yaw_range, plant_foot
+from rd_pipeline.retarget.frames import frame_from_axes, yaw_and_pitch
+from rd_pipeline.retarget.lafan_joints import FEET, HIPS_LR, LOWER_SPINE, PELVIS, SHOULDERS_LR, TOES, TORSO
+from rd_pipeline.retarget.legs import keep_feet_apart, keep_legs_reachable, match_stance_width
 from rd_pipeline.retarget.settings import BodyContactSettings, TargetShaping
-from rd_pipeline.retarget.smoothing import smooth_cover, smoothstep
 from rd_pipeline.robots import Robot
 
-# LAFAN1 joints that define frames; the robot side uses whichever bodies the config maps to them.
-PELVIS, TORSO = "Hips", "Spine2"
-FEET = ("LeftFoot", "RightFoot")
-KNEES = ("LeftLeg", "RightLeg")
-TOES = ("LeftToe", "RightToe")
-HIPS_LR = ("LeftUpLeg", "RightUpLeg")
-SHOULDERS_LR = ("LeftArm", "RightArm")
-LOWER_SPINE = "Spine"
 TARGETS_FILE = "targets.npz"
 """File name of the keypoint targets inside a retarget artifact."""
 
@@ -147,8 +141,8 @@ def build_targets(
             scale = np.linalg.norm(rest[joint] - rest[parent]) / _median_length(human_pos, index, joint, parent)
             targets[joint] = targets[parent] + scale * segment
 
-    _match_stance_width(targets, rest, rigid_frame[PELVIS])
-    _keep_feet_apart(targets, rest, rigid_frame[PELVIS], fps, shape.min_stance_fraction)
+    match_stance_width(targets, rest, rigid_frame[PELVIS])
+    keep_feet_apart(targets, rest, rigid_frame[PELVIS], fps, shape.min_stance_fraction)
     contact = _human_contacts(human_pos, index, fps, contact)
     # Lift or lower everything so planted feet sit at the robot's sole height (robot and human
     # ankles are not at the same height in proportion to the legs).
@@ -162,16 +156,16 @@ def build_targets(
     foot_lift = np.zeros((human_pos.shape[0], 2))
     for side, (foot, toe) in enumerate(zip(FEET, TOES)):
         forward = human_pos[:, index[toe]] - human_pos[:, index[foot]]
-        position, rotation, foot_lift[:, side] = _plant_foot(
+        position, rotation, foot_lift[:, side] = plant_foot(
             targets[foot], forward, human_rot[:, index[foot]], contact[:, side], foot_vertices[side], fps,
-            shape.swing_clearance_m, shape.swing_lift_time_s, pelvis_yaw, _leg_yaw_range(robot, body_for[foot]),
+            shape.swing_clearance_m, shape.swing_lift_time_s, pelvis_yaw, leg_yaw_range(robot, body_for[foot]),
             shape.planted_tilt_rad,
         )
         targets[foot] = position
         offset = robot_rest_rotation(robot, body_for[foot])
         orientations[body_for[foot]] = rotation @ offset
 
-    _keep_legs_reachable(targets, rest, fps, shape.reach_fraction)
+    keep_legs_reachable(targets, rest, fps, shape.reach_fraction)
     resting = label_body_contacts(human_pos, index, joints, fps, body_contact)
     for k, joint in enumerate(joints):
         if resting[:, k].any():
@@ -181,68 +175,6 @@ def build_targets(
         positions=np.stack([targets[j] for j in joints], axis=1), orientations=orientations,
         foot_contact=contact, foot_lift=foot_lift, body_contact=resting, human_scale=root_scale, human_pelvis=human_pos[:, index[PELVIS]] * root_scale,
     )
-
-
-def _match_stance_width(targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], pelvis: np.ndarray) -> None:
-    """Move each leg sideways (in the pelvis frame) so the typical stance width is the robot's own.
-
-    A narrow human stance scaled onto a robot with wide hips and little hip roll (H1: +-0.43 rad)
-    asks for feet the robot cannot bring together; the offset is the robot's rest foot width minus
-    the clip's median, a constant per leg.
-    """
-    for knee, foot in (("LeftLeg", "LeftFoot"), ("RightLeg", "RightFoot")):
-        lateral = np.einsum("ti,ti->t", pelvis[:, :, 1], targets[foot] - targets[PELVIS])
-        robot_lateral = float((rest[foot] - rest[PELVIS])[1])  # rest frames are world-aligned
-        shift = (robot_lateral - float(np.median(lateral))) * pelvis[:, :, 1]
-        targets[knee] = targets[knee] + shift
-        targets[foot] = targets[foot] + shift
-
-
-def _keep_feet_apart(
-    targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], pelvis: np.ndarray, fps: float, fraction: float,
-) -> None:
-    """Push the legs apart where the feet come horizontally closer than `fraction` of the robot's rest
-    stance: a human crosses and passes legs closer than a robot's thick knees and feet can.
-
-    The push is along the line between the feet (sideways when they pass each other, whatever the
-    pelvis does in a turn), a smooth cover of the per-frame deficit shared by both legs; planting
-    picks it up.
-    """
-    between = (targets[FEET[0]] - targets[FEET[1]])[:, :2]
-    distance = np.linalg.norm(between, axis=1)
-    # Feet exactly on top of each other have no line between them: use the pelvis' left.
-    direction = np.where(distance[:, None] > 1e-6, between / np.maximum(distance, 1e-6)[:, None], pelvis[:, :2, 1])
-    direction = gaussian_filter1d(direction, 0.05 * fps, axis=0, mode="nearest")
-    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-    rest_distance = float(np.linalg.norm((rest[FEET[0]] - rest[FEET[1]])[:2]))
-    push = smooth_cover(np.maximum(fraction * rest_distance - distance, 0.0), fps, 0.1)
-    for knee, foot, sign in (("LeftLeg", FEET[0], 0.5), ("RightLeg", FEET[1], -0.5)):
-        shift = np.zeros_like(targets[foot])
-        shift[:, :2] = sign * push[:, None] * direction
-        targets[knee] = targets[knee] + shift
-        targets[foot] = targets[foot] + shift
-
-
-def _keep_legs_reachable(targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], fps: float, fraction: float) -> None:
-    """Lower the body (not the feet) where a planted foot would need a leg longer than the robot's.
-
-    The drop is a smooth cover of the per-frame requirement, so it adds no jerk.
-    """
-    need = np.zeros(targets[PELVIS].shape[0])
-    for hip, foot in zip(HIPS_LR, FEET):
-        reach = fraction * np.linalg.norm(rest[hip] - rest[foot])  # legs are straight in the rest pose
-        delta = targets[hip] - targets[foot]
-        horizontal = np.linalg.norm(delta[:, :2], axis=1)
-        # Lowering only helps a leg that is too long vertically; a leg stretched out along the
-        # floor (sitting, lying) stays out of reach however low the body goes.
-        reachable = horizontal < reach
-        height = np.sqrt(reach**2 - np.minimum(horizontal, reach) ** 2)
-        need = np.maximum(need, np.where(reachable, delta[:, 2] - height, 0.0))
-    drop = smooth_cover(np.maximum(need, 0.0), fps, 0.1)
-    for joint in targets:
-        # A knee sits between a lowered hip and a foot that stays: it comes down about half as far.
-        share = 0.0 if joint in FEET else 0.5 if joint in KNEES else 1.0
-        targets[joint] = targets[joint] - share * drop[:, None] * np.array([0.0, 0.0, 1.0])
 
 
 def _mapped_ancestor(human: HumanMotion, joint: str, mapped: set[str]) -> str | None:
@@ -303,117 +235,3 @@ def _orientations(
         offset = frame(rest_points).T @ robot_rest_rotation(robot, body)
         out[body] = frame(human) @ offset
     return out
-
-
-def _plant_foot(
-    free: np.ndarray, forward: np.ndarray, human_rotation: np.ndarray, contact: np.ndarray, sole_vertices: np.ndarray,
-    fps: float, clearance: float, lift_time_s: float, pelvis_yaw: np.ndarray, yaw_range: tuple[float, float],
-    tilt_limit: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Foot targets: fixed and flat while planted; in swing, the human path bent to meet the plants.
-    Returns positions, rotations and the height the sole clears the floor by (0 while planted).
-
-    Swing orientation follows the human foot joint (its toe line is useless as a heading when the
-    foot points down), through the constant offset that makes it flat and aligned during plants.
-    """
-    n = free.shape[0]
-    sole = float(-sole_vertices[:, 2].min())
-    heading = np.unwrap(yaw_and_pitch(forward)[0])
-    position = free.copy()
-    planted_weight = np.zeros(n)
-    lift = np.zeros(n)
-    anchors = []
-    for start, end in contact_runs(contact):
-        anchors.append((start, end, np.array([*free[start, :2], sole])))
-        position[start:end] = anchors[-1][2]
-        # A planted foot keeps one heading, within what the leg's vertical-axis joints can turn from
-        # the pelvis (the H1's hip yaw only spans +-0.43 rad).
-        relative = _wrap(np.mean(heading[start:end]) - np.mean(pelvis_yaw[start:end]))
-        heading[start:end] = np.mean(pelvis_yaw[start:end]) + np.clip(relative, *yaw_range)
-        planted_weight[start:end] = 1.0
-    flat = Rotation.from_matrix(yaw_pitch_frame(heading, np.zeros(n)))
-    human = Rotation.from_matrix(human_rotation)
-    calibration = contact if contact.any() else np.ones(n, dtype=bool)
-    offset = (human[calibration].inv() * flat[calibration]).mean()
-    swinging = human * offset
-    # A foot planted on its toes or its instep (kneeling, crouching) keeps the human's tilt: laying
-    # it flat would lift the knees off the floor.
-    tilt = np.arccos(np.clip(swinging.as_matrix()[:, 2, 2], -1.0, 1.0))
-    tilted = smoothstep((tilt - tilt_limit) / tilt_limit)  # eases in over one more `tilt_limit`
-    for start, end, _ in anchors:
-        run = slice(start, end)
-        if tilted[run].any():
-            delta = (flat[run].inv() * swinging[run]).as_rotvec()
-            flat = _assign(flat, run, flat[run] * Rotation.from_rotvec(delta * tilted[run, None]))
-    # Swing: add a correction that blends from the previous plant's offset to the next one's, so
-    # the foot leaves and lands exactly where it is planted. A robot foot near the floor must not
-    # slide: it first rises to `clearance`, then travels, then comes down on its plant.
-    ramp = max(1, int(round(0.1 * fps)))
-    rise = max(1, int(round(lift_time_s * fps)))
-    edges = [0] + [x for start, end, _ in anchors for x in (start, end)] + [n]
-    for i in range(len(anchors) + 1):
-        a, b = edges[2 * i], edges[2 * i + 1]
-        if b <= a:
-            continue
-        before = anchors[i - 1][2] - free[a - 1] if i > 0 else None
-        after = anchors[i][2] - free[b] if i < len(anchors) else None
-        if before is None and after is None:  # no contact in the whole clip: only keep feet above ground
-            lift[:] = clearance
-            continue
-        before = after if before is None else before
-        after = before if after is None else after
-        t = np.arange(a, b)
-        since = t - a + 1 if i > 0 else np.full(b - a, n)
-        until = b - t if i < len(anchors) else np.full(b - a, n)
-        # Horizontal travel happens between the rise and the descent (time-warped human path).
-        hold = min(rise, (b - a) // 3)
-        lo, hi = (a - 1 if i > 0 else a), (b if i < len(anchors) else b - 1)
-        warp = lo + (hi - lo) * np.clip((t - lo - hold) / max(hi - lo - 2 * hold, 1), 0.0, 1.0)
-        path = np.stack([np.interp(warp, np.arange(n), free[:, k]) for k in range(3)], axis=1)
-        s = smoothstep(np.clip((warp - lo) / max(hi - lo, 1), 0.0, 1.0))
-        position[a:b] = path + (1.0 - s)[:, None] * before + s[:, None] * after
-        lift[a:b] = clearance * smoothstep(np.clip(np.minimum(since, until) / rise, 0.0, 1.0))
-        planted_weight[a:b] = 1.0 - smoothstep(np.clip(np.minimum(since, until) / ramp, 0.0, 1.0))
-        # Near a plant, ease toward that plant's flat orientation.
-        nearest = np.where(since <= until, a - 1, b) if 0 < i < len(anchors) else np.full(b - a, a - 1 if i > 0 else b)
-        flat_near = flat[np.clip(nearest, 0, n - 1)]
-        delta = (swinging[a:b].inv() * flat_near).as_rotvec()
-        swinging_blended = swinging[a:b] * Rotation.from_rotvec(delta * planted_weight[a:b, None])
-        flat = _assign(flat, slice(a, b), swinging_blended)
-    rotation = flat.as_matrix()
-    # The lowest point of the (possibly pitched) foot clears the floor by `lift`: a pointed toe
-    # near the floor would otherwise drag along it.
-    depth = -np.einsum("tij,vj->tvi", rotation, sole_vertices)[..., 2].min(axis=1)
-    position[:, 2] = np.maximum(position[:, 2], lift + depth)
-    return position, rotation, lift
-
-
-def _wrap(angle: float) -> float:
-    return float((angle + np.pi) % (2 * np.pi) - np.pi)
-
-
-def _leg_yaw_range(robot: Robot, foot: str) -> tuple[float, float]:
-    """How far the foot can turn about the vertical from the pelvis: summed ranges of the hinge
-    joints between them whose axis is vertical in the rest pose (read from the model)."""
-    model = robot.model
-    data = mujoco.MjData(model)
-    data.qpos[3] = 1.0
-    mujoco.mj_kinematics(model, data)
-    low = high = 0.0
-    body = robot.body_ids[foot]
-    while body > 0 and model.body_jntnum[body] >= 0:
-        for joint in range(model.body_jntadr[body], model.body_jntadr[body] + model.body_jntnum[body]):
-            if model.jnt_type[joint] != mujoco.mjtJoint.mjJNT_HINGE:
-                continue
-            axis = data.xaxis[joint]
-            if abs(axis[2]) > 0.9:
-                lo, hi = sorted(model.jnt_range[joint] * np.sign(axis[2]))
-                low, high = low + lo, high + hi
-        body = model.body_parentid[body]
-    return low, high
-
-
-def _assign(rotations: Rotation, where: slice, values: Rotation) -> Rotation:
-    quats = rotations.as_quat()
-    quats[where] = values.as_quat()
-    return Rotation.from_quat(quats)

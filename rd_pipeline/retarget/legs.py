@@ -1,0 +1,72 @@
+"""Leg targets a robot can reach: its own stance width, crossed legs opened, the body lowered where a
+planted leg is too short."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from rd_pipeline.retarget.lafan_joints import FEET, HIPS_LR, KNEES, PELVIS
+from rd_pipeline.retarget.smoothing import smooth_cover
+
+
+def match_stance_width(targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], pelvis: np.ndarray) -> None:
+    """Move each leg sideways (in the pelvis frame) so the typical stance width is the robot's own.
+
+    A narrow human stance scaled onto a robot with wide hips and little hip roll (H1: +-0.43 rad)
+    asks for feet the robot cannot bring together; the offset is the robot's rest foot width minus
+    the clip's median, a constant per leg.
+    """
+    for knee, foot in (("LeftLeg", "LeftFoot"), ("RightLeg", "RightFoot")):
+        lateral = np.einsum("ti,ti->t", pelvis[:, :, 1], targets[foot] - targets[PELVIS])
+        robot_lateral = float((rest[foot] - rest[PELVIS])[1])  # rest frames are world-aligned
+        shift = (robot_lateral - float(np.median(lateral))) * pelvis[:, :, 1]
+        targets[knee] = targets[knee] + shift
+        targets[foot] = targets[foot] + shift
+
+
+def keep_feet_apart(
+    targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], pelvis: np.ndarray, fps: float, fraction: float,
+) -> None:
+    """Push the legs apart where the feet come horizontally closer than `fraction` of the robot's rest
+    stance: a human crosses and passes legs closer than a robot's thick knees and feet can.
+
+    The push is along the line between the feet (sideways when they pass each other, whatever the
+    pelvis does in a turn), a smooth cover of the per-frame deficit shared by both legs; planting
+    picks it up.
+    """
+    between = (targets[FEET[0]] - targets[FEET[1]])[:, :2]
+    distance = np.linalg.norm(between, axis=1)
+    # Feet exactly on top of each other have no line between them: use the pelvis' left.
+    direction = np.where(distance[:, None] > 1e-6, between / np.maximum(distance, 1e-6)[:, None], pelvis[:, :2, 1])
+    direction = gaussian_filter1d(direction, 0.05 * fps, axis=0, mode="nearest")
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    rest_distance = float(np.linalg.norm((rest[FEET[0]] - rest[FEET[1]])[:2]))
+    push = smooth_cover(np.maximum(fraction * rest_distance - distance, 0.0), fps, 0.1)
+    for knee, foot, sign in (("LeftLeg", FEET[0], 0.5), ("RightLeg", FEET[1], -0.5)):
+        shift = np.zeros_like(targets[foot])
+        shift[:, :2] = sign * push[:, None] * direction
+        targets[knee] = targets[knee] + shift
+        targets[foot] = targets[foot] + shift
+
+
+def keep_legs_reachable(targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], fps: float, fraction: float) -> None:
+    """Lower the body (not the feet) where a planted foot would need a leg longer than the robot's.
+
+    The drop is a smooth cover of the per-frame requirement, so it adds no jerk.
+    """
+    need = np.zeros(targets[PELVIS].shape[0])
+    for hip, foot in zip(HIPS_LR, FEET):
+        reach = fraction * np.linalg.norm(rest[hip] - rest[foot])  # legs are straight in the rest pose
+        delta = targets[hip] - targets[foot]
+        horizontal = np.linalg.norm(delta[:, :2], axis=1)
+        # Lowering only helps a leg that is too long vertically; a leg stretched out along the
+        # floor (sitting, lying) stays out of reach however low the body goes.
+        reachable = horizontal < reach
+        height = np.sqrt(reach**2 - np.minimum(horizontal, reach) ** 2)
+        need = np.maximum(need, np.where(reachable, delta[:, 2] - height, 0.0))
+    drop = smooth_cover(np.maximum(need, 0.0), fps, 0.1)
+    for joint in targets:
+        # A knee sits between a lowered hip and a foot that stays: it comes down about half as far.
+        share = 0.0 if joint in FEET else 0.5 if joint in KNEES else 1.0
+        targets[joint] = targets[joint] - share * drop[:, None] * np.array([0.0, 0.0, 1.0])
