@@ -62,6 +62,7 @@ def test_planted_feet_stay_put_and_follow_their_sole_target(g1_dance: RetargetRe
     reference = g1_dance.reference
     robot = load_robot("g1")
     assert 0.3 < reference.foot_contact.mean() < 0.95
+    angles, flat = [], []
     for side, foot in enumerate(robot.config.foot_bodies):
         b = reference.body_names.index(foot)
         for start, end in contact_runs(reference.foot_contact[:, side]):
@@ -71,13 +72,15 @@ def test_planted_feet_stay_put_and_follow_their_sole_target(g1_dance: RetargetRe
             inner = slice(start + 3, end - 3)
             drift = np.ptp(reference.body_pos_w[inner, b, :2], axis=0).max()
             assert drift < 0.01, f"{foot} slid {drift * 1000:.1f} mm during frames {start}-{end}"
-            # Flat, or tilted as the human's foot is (heel up): the sole follows its target.
             up = Rotation.from_quat(reference.body_quat_w[inner, b][:, [1, 2, 3, 0]]).apply([0, 0, 1])
             target_up = g1_dance.targets.orientations[foot][inner][:, :, 2]
-            angle = np.degrees(np.arccos(np.clip(np.einsum("ti,ti->t", up, target_up), -1, 1)))
-            assert angle.max() < 8.0
-            flat = np.degrees(np.arccos(np.clip(target_up[:, 2], -1, 1))) < 1.0
-            assert flat.mean() > 0.5
+            angles.append(np.degrees(np.arccos(np.clip(np.einsum("ti,ti->t", up, target_up), -1, 1))))
+            flat.append(np.degrees(np.arccos(np.clip(target_up[:, 2], -1, 1))) < 1.0)
+    # Flat, or tilted as the human's foot is (heel up): the sole follows its target; a heel-up
+    # target beyond the ankle's range is followed as far as the range allows.
+    angles = np.concatenate(angles)
+    assert np.percentile(angles, 95) < 5.0 and angles.max() < 20.0
+    assert np.concatenate(flat).mean() > 0.5
 
 
 def test_scale_comes_from_the_models() -> None:
