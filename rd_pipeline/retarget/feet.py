@@ -60,7 +60,8 @@ def plant_foot(
     rise = max(1, int(round(lift_time_s * fps)))
     edges = [0] + [x for start, end, _ in anchors for x in (start, end)] + [n]
     for i in range(len(anchors) + 1):
-        a, b = edges[2 * i], edges[2 * i + 1]
+        a = edges[2 * i]
+        b = edges[2 * i + 1]
         if b <= a:
             continue
         before = anchors[i - 1][2] - free[a - 1] if i > 0 else None
@@ -75,7 +76,8 @@ def plant_foot(
         until = b - t if i < len(anchors) else np.full(b - a, n)
         # Horizontal travel happens between the rise and the descent (time-warped human path).
         hold = min(rise, (b - a) // 3)
-        lo, hi = (a - 1 if i > 0 else a), (b if i < len(anchors) else b - 1)
+        lo = a - 1 if i > 0 else a
+        hi = b if i < len(anchors) else b - 1
         warp = lo + (hi - lo) * np.clip((t - lo - hold) / max(hi - lo - 2 * hold, 1), 0.0, 1.0)
         path = np.stack([np.interp(warp, np.arange(n), free[:, k]) for k in range(3)], axis=1)
         s = smoothstep(np.clip((warp - lo) / max(hi - lo, 1), 0.0, 1.0))
@@ -116,7 +118,8 @@ def leg_yaw_range(robot: Robot, foot: str) -> tuple[float, float]:
             axis = data.xaxis[joint]
             if abs(axis[2]) > 0.9:
                 lo, hi = sorted(model.jnt_range[joint] * np.sign(axis[2]))
-                low, high = low + lo, high + hi
+                low += lo
+                high += hi
         body = model.body_parentid[body]
     return low, high
 

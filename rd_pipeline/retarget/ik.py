@@ -26,7 +26,9 @@ class RetargetIk:
     def __init__(
         self, robot: Robot, targets: RetargetTargets, weights: IkWeights, settings: IkSettings, hulls: BodyHulls,
     ) -> None:
-        self.robot, self.targets, self.settings = robot, targets, settings
+        self.robot = robot
+        self.targets = targets
+        self.settings = settings
         model = robot.model
         self.configuration = mink.Configuration(model)
         config = robot.config
@@ -65,8 +67,8 @@ class RetargetIk:
             (collision_geoms(model, robot.body_ids[a]), collision_geoms(model, robot.body_ids[b]))
             for a, b in config.collision_pairs
         ]
-        self.collision_pairs = np.array([(a, b) for first, second in pairs for a in first for b in second], dtype=int)
-        self.collision_pairs = self.collision_pairs.reshape(-1, 2)
+        geom_pairs = [(a, b) for first, second in pairs for a in first for b in second]
+        self.collision_pairs = np.array(geom_pairs, dtype=int).reshape(-1, 2)
         self.pair_reach = model.geom_rbound[self.collision_pairs].sum(axis=1)
         self.limits: list[mink.Limit] = [self.step_limit, self.floor]
         if pairs:

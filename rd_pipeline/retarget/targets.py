@@ -201,9 +201,11 @@ def _median_length(pos: np.ndarray, index: dict[str, int], a: str, b: str) -> fl
 
 def _human_contacts(pos: np.ndarray, index: dict[str, int], fps: float, thresholds: ContactThresholds) -> np.ndarray:
     """Foot contact from the lower of ankle and toe, each relative to its own planted height."""
-    heights, points = [], []
+    heights = []
+    points = []
     for foot, toe in zip(FEET, TOES):
-        ankle_z, toe_z = pos[:, index[foot], 2], pos[:, index[toe], 2]
+        ankle_z = pos[:, index[foot], 2]
+        toe_z = pos[:, index[toe], 2]
         heights.append(np.minimum(ankle_z - np.percentile(ankle_z, 2), toe_z - np.percentile(toe_z, 2)))
         points.append(0.5 * (pos[:, index[foot]] + pos[:, index[toe]]))
     foot_points = np.stack(points, axis=1)
