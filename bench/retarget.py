@@ -80,7 +80,8 @@ def main() -> None:
             rows.append(row)
             with log.open("a") as file:
                 file.write(json.dumps(row) + "\n")
-            print(f"{row['robot']:<5} {row['motion']:<26} {row['seconds']:7.1f} s  " + _verdict(row["ours"]), flush=True)
+            label = f"{row['robot']:<5} {row['motion']:<26} {row['seconds']:7.1f} s"
+            print(f"{label}  {_verdict(row['ours'])}", flush=True)
     order = {(robot, motion): i for i, (motion, robot) in enumerate((m, r) for m in args.motions for r in args.robots)}
     rows.sort(key=lambda row: order.get((row["robot"], row["motion"]), len(order)))
     args.out.with_suffix(".json").write_text(json.dumps(rows, indent=2) + "\n")
@@ -161,7 +162,9 @@ def _aligned(reference, positions: np.ndarray, bodies):
 
 
 def _verdict(quality: dict) -> str:
-    failed = [f"{COLUMNS[key]}={quality[key]}" for key, bar in BARS.items() if quality[key] is not None and quality[key] > bar]
+    failed = [
+        f"{COLUMNS[key]}={quality[key]}" for key, bar in BARS.items() if quality[key] is not None and quality[key] > bar
+    ]
     return "meets every bar" if not failed else "over: " + ", ".join(failed)
 
 
@@ -188,7 +191,12 @@ def _table(rows: list[dict]) -> str:
 def _cell(value, key: str) -> str:
     if value is None:
         return "-"
-    text = f"{value:.3f}" if key == "pelvis_height_dev_p95_m" else f"{value:.1f}" if isinstance(value, float) else str(value)
+    if key == "pelvis_height_dev_p95_m":
+        text = f"{value:.3f}"
+    elif isinstance(value, float):
+        text = f"{value:.1f}"
+    else:
+        text = str(value)
     return f"**{text}**" if key in BARS and value > BARS[key] else text
 
 

@@ -146,7 +146,8 @@ def test_header_one_frame_over_whole_lines_is_read_with_a_warning(tmp_path: Path
     warnings = [line for line in result.stderr.splitlines() if line.startswith("warning:")]
     (warning,) = warnings  # the CLI names the file by its resolved path
     assert warning.startswith("warning: /")
-    assert warning.endswith("/fallAndGetUp1_subject1.bvh: Frames says 5047 but the file has 5046 whole motion lines; read 5046")
+    message = "Frames says 5047 but the file has 5046 whole motion lines; read 5046"
+    assert warning.endswith(f"/fallAndGetUp1_subject1.bvh: {message}")
 
 
 def test_header_one_frame_over_a_cut_line_stays_an_error(dance: Path, tmp_path: Path) -> None:

@@ -120,7 +120,8 @@ def test_retarget_map_with_an_unknown_human_joint() -> None:
     broken = dataclasses.replace(robot, config=config)
     p = RetargetParams()
     with pytest.raises(PipelineError, match=r"bodies.retarget names human joint 'LeftElbow', not in the skeleton"):
-        retarget(_human("dance1_subject2", seconds=1.0), broken, p.fps, p.contact, p.shape, p.body_contact, p.weights, p.ik)
+        retarget(_human("dance1_subject2", seconds=1.0), broken, p.fps, p.contact, p.shape, p.body_contact,
+                 p.weights, p.ik)
 
 
 def test_stage_writes_reference_and_quality(artifacts: Path) -> None:

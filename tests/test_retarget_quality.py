@@ -212,7 +212,8 @@ def test_body_hulls_match_posed_geometry(name: str) -> None:
         low, high = robot.joint_range.T
         data.qpos[robot.qpos_indices] = rng.uniform(low, high)
         mujoco.mj_kinematics(model, data)
-        ours = hulls.lowest_z(data.xpos[None, 1:], data.xquat[None, 1:], [model.body(b).name for b in range(1, model.nbody)])
+        names = [model.body(b).name for b in range(1, model.nbody)]
+        ours = hulls.lowest_z(data.xpos[None, 1:], data.xquat[None, 1:], names)
         for k, body in enumerate(hulls.body_ids):
             geoms = set(collision_geoms(model, int(body)))
             if model.body(int(body)).name in robot.config.foot_bodies:  # and the foot meshes a viewer sees
@@ -243,7 +244,8 @@ def test_knees_through_the_floor_are_seen_with_feet_clear(g1) -> None:
     assert quality["feet_penetration_max_mm"] == 0.0
     assert quality["penetration_max_mm"] > 100.0
     assert quality["penetration_max_mm"] == pytest.approx(-1000.0 * lowest.min(), abs=1e-3)
-    assert quality["penetration_deepest_body"] in {f"{s}_{b}" for s in ("left", "right") for b in ("hip_yaw_link", "knee_link")}
+    legs = {f"{side}_{link}" for side in ("left", "right") for link in ("hip_yaw_link", "knee_link")}
+    assert quality["penetration_deepest_body"] in legs
     assert quality_series(g1, reference)["penetration_m"].shape == (n_frames,)
 
 

@@ -259,7 +259,8 @@ def _position_cost_schedule(targets: RetargetTargets, config, weights: IkWeights
     costs[targets.body_contact] = weights.contact_position
     root = targets.bodies.index(config.root_body)
     costs[:, root] = [weights.root_position, weights.root_position, weights.root_height]
-    costs[targets.body_contact[:, root], root] = np.maximum(costs[targets.body_contact[:, root], root], weights.contact_position)
+    resting = targets.body_contact[:, root]
+    costs[resting, root] = np.maximum(costs[resting, root], weights.contact_position)
     for side, foot in enumerate(config.foot_bodies):
         k = targets.bodies.index(foot)
         # A swinging foot near the floor must not slide either: the full cost until it is lifted.

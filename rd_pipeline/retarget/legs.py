@@ -50,7 +50,9 @@ def keep_feet_apart(
         targets[foot] = targets[foot] + shift
 
 
-def keep_legs_reachable(targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], fps: float, fraction: float) -> None:
+def keep_legs_reachable(
+    targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], fps: float, fraction: float,
+) -> None:
     """Lower the body (not the feet) where a planted foot would need a leg longer than the robot's.
 
     The drop is a smooth cover of the per-frame requirement, so it adds no jerk.

@@ -106,7 +106,7 @@ class IkSettings:
     catch_up_window_s: float = 2.0
     """... over this many seconds."""
     step_halvings: int = 4
-    """A solver step that pushes a configured body pair deeper into contact is halved up to this many times, then dropped ..."""
+    """A step pushing a configured body pair deeper into contact is halved up to this many times, then dropped ..."""
     pair_depth_tolerance_m: float = 0.002
     """... where contact means deeper than this (touching is allowed: the self-collision ruler counts from 5 mm) ..."""
     pair_depth_limit_m: float = 0.004

@@ -44,7 +44,8 @@ class BodyHulls:
             if body in feet:
                 # The G1 feet collide through sole spheres; the foot mesh around them is what a
                 # viewer sees on the floor, so it must not sink either.
-                geoms = sorted({*geoms, *(g for g in _body_geoms(model, body) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH)})
+                meshes = [g for g in _body_geoms(model, body) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH]
+                geoms = sorted({*geoms, *meshes})
             if not geoms:
                 continue
             support = [_geom_support(model, g) for g in geoms]
