@@ -9,7 +9,7 @@ import numpy as np
 
 @dataclass(frozen=True)
 class ContactThresholds:
-    """When a foot counts as planted. Heights are above the clip's ground level."""
+    """When a foot (or another body part) counts as planted. Heights are above the clip's ground level."""
 
     enter_height_m: float = 0.03
     """A free foot lands when it is below this height ..."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rd_pipeline.motion.contact import ContactThresholds, contact_runs, label_contacts
+from rd_pipeline.motion.contact import contact_runs, label_contacts
 from rd_pipeline.retarget.settings import BodyContactSettings
 from rd_pipeline.retarget.smoothing import smoothstep
 
@@ -22,13 +22,7 @@ def label_body_contacts(
     for k, joint in enumerate(joints):
         if joint in settings.excluded_joints:
             continue
-        height = settings.trunk_height_m if joint in settings.trunk_joints else settings.limb_height_m
-        thresholds = ContactThresholds(
-            enter_height_m=height,
-            enter_speed_m_s=settings.enter_speed_m_s,
-            exit_height_m=height + settings.exit_margin_m,
-            exit_speed_m_s=settings.exit_speed_m_s,
-        )
+        thresholds = settings.trunk if joint in settings.trunk_joints else settings.limb
         contact[:, k] = label_contacts(human_pos[:, None, index[joint]], fps, 0.0, thresholds)[:, 0]
     return contact
 

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from rd_pipeline.motion.contact import ContactThresholds
+
 
 @dataclass(frozen=True)
 class TargetShaping:
@@ -27,18 +29,16 @@ class TargetShaping:
 class BodyContactSettings:
     """When a human knee, elbow, hand, pelvis or torso rests on the floor (LAFAN1's floor is z = 0)."""
 
-    limb_height_m: float = 0.10
-    """A limb joint (knee, elbow, wrist) below this height may be on the floor ..."""
-    trunk_height_m: float = 0.20
-    """... a trunk joint (`trunk_joints`) below this one, as it sits deeper inside the body ..."""
-    enter_speed_m_s: float = 0.3
-    """... when it also moves horizontally slower than this."""
-    exit_margin_m: float = 0.04
-    """A joint in contact leaves the floor this far above its entry height ..."""
-    exit_speed_m_s: float = 0.6
-    """... or when it moves faster than this (rolling, sliding)."""
+    limb: ContactThresholds = ContactThresholds(
+        enter_height_m=0.10, enter_speed_m_s=0.3, exit_height_m=0.14, exit_speed_m_s=0.6,
+    )
+    """When a limb joint (knee, elbow, wrist) lands on the floor and leaves it (rolling, sliding)."""
+    trunk: ContactThresholds = ContactThresholds(
+        enter_height_m=0.20, enter_speed_m_s=0.3, exit_height_m=0.24, exit_speed_m_s=0.6,
+    )
+    """The same for a trunk joint (`trunk_joints`), which sits deeper inside the body."""
     trunk_joints: tuple[str, ...] = ("Hips", "Spine2")
-    """LAFAN1 joints that rest on the floor at `trunk_height_m`."""
+    """LAFAN1 joints that rest on the floor by the `trunk` thresholds."""
     excluded_joints: tuple[str, ...] = ("LeftFoot", "RightFoot", "LeftUpLeg", "RightUpLeg", "LeftArm", "RightArm")
     """Joints never held by this rule: the feet are planted separately; hips and shoulders are rigid on the trunk."""
     release_s: float = 0.3
