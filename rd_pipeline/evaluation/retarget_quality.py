@@ -17,8 +17,8 @@ import numpy as np
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.robots import Robot
-from rd_pipeline.robots.hulls import BodyHulls, hull_vertices, mesh_points_in_body, rotation_z_row
-from rd_pipeline.robots.model import collision_geoms
+from rd_pipeline.robots.hulls import BodyHulls, hull_vertices, mesh_points_in_body, support_lowest_z
+from rd_pipeline.robots.model import collision_geom_pairs
 
 QUALITY_FILE = "quality.json"
 """File name of a quality report inside an artifact (retarget and import stages)."""
@@ -81,9 +81,7 @@ class FootMeshes:
             if body not in body_names:
                 raise PipelineError(f"foot body '{body}' is not among the reference's bodies")
             index = list(body_names).index(body)
-            # Only world z is needed, so only the third row of each rotation matrix.
-            z_row = rotation_z_row(body_quat_w[:, index])
-            lowest[:, foot] = body_pos_w[:, index, 2] + (z_row @ vertices.T).min(axis=1)
+            lowest[:, foot] = support_lowest_z(body_pos_w[:, index], body_quat_w[:, index], vertices, 0.0)
         return lowest
 
 
@@ -209,15 +207,7 @@ def self_collision_frames(robot: Robot, reference: ReferenceMotion, depth_m: flo
 def colliding_frames(robot: Robot, qpos: np.ndarray, depth_m: float) -> np.ndarray:
     """(T,) bool: some configured body pair is closer than -depth_m (a negative depth asks for clearance)."""
     model = robot.model
-    geom_pairs = np.array(
-        [
-            (g1, g2)
-            for body_a, body_b in robot.config.collision_pairs
-            for g1 in collision_geoms(model, robot.body_ids[body_a])
-            for g2 in collision_geoms(model, robot.body_ids[body_b])
-        ],
-        dtype=np.int64,
-    ).reshape(-1, 2)
+    geom_pairs = collision_geom_pairs(robot)
     colliding = np.zeros(len(qpos), dtype=bool)
     if len(geom_pairs) == 0:
         return colliding

@@ -17,7 +17,7 @@ from rd_pipeline.retarget.settings import IkSettings, IkWeights
 from rd_pipeline.retarget.targets import RetargetTargets
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.hulls import BodyHulls
-from rd_pipeline.robots.model import collision_geoms
+from rd_pipeline.robots.model import collision_geom_pairs, collision_geoms
 
 
 class RetargetIk:
@@ -61,14 +61,14 @@ class RetargetIk:
         self.floor = FloorLimit(model, hulls, settings.floor_clearance_m, settings.floor_detection_m)
         # A swinging foot keeps part of its target's lift as a hard clearance: skimming the floor
         # with a pointed toe reads as dragging, whatever the foot's position error.
-        self.foot_lift_columns = [list(hulls.body_names).index(b) for b in config.foot_bodies]
-        self.foot_clearance = settings.swing_floor_fraction * targets.foot_lift
+        self.floor_raise = np.zeros((targets.n_frames, len(hulls.body_names)))
+        feet_columns = [hulls.body_names.index(b) for b in config.foot_bodies]
+        self.floor_raise[:, feet_columns] = settings.swing_floor_fraction * targets.foot_lift
         pairs = [
             (collision_geoms(model, robot.body_ids[a]), collision_geoms(model, robot.body_ids[b]))
             for a, b in config.collision_pairs
         ]
-        geom_pairs = [(a, b) for first, second in pairs for a in first for b in second]
-        self.collision_pairs = np.array(geom_pairs, dtype=int).reshape(-1, 2)
+        self.collision_pairs = collision_geom_pairs(robot)
         self.pair_reach = model.geom_rbound[self.collision_pairs].sum(axis=1)
         self.limits: list[mink.Limit] = [self.step_limit, self.floor]
         if pairs:
@@ -99,9 +99,7 @@ class RetargetIk:
 
     def _set_frame_targets(self, t: int) -> None:
         targets = self.targets
-        extra = np.zeros(len(self.floor.body_ids))
-        extra[self.foot_lift_columns] = self.foot_clearance[t]
-        self.floor.raise_bodies(extra)
+        self.floor.raise_bodies(self.floor_raise[t])
         costs = self.position_costs
         if t == 0 or np.any(costs[t] != costs[t - 1]):
             for task, cost in zip(self.frame_tasks, costs[t]):
@@ -137,11 +135,6 @@ class RetargetIk:
         """Mean distance of the key bodies to their targets in the current configuration."""
         positions = self.configuration.data.xpos[self.key_body_ids]
         return float(np.linalg.norm(positions - self.targets.positions[t], axis=1).mean())
-
-    def _lagging(self, t: int, recent: deque[float]) -> bool:
-        if not recent:
-            return False
-        return self._keypoint_error(t) > float(np.median(recent)) + self.settings.catch_up_margin_m
 
     def _iterate(self, tasks: list) -> None:
         """One solver step, shortened while it would push a configured body pair deeper into contact.
@@ -215,8 +208,10 @@ class RetargetIk:
                 self._iterate(self.tasks)
             # A frame that fell far behind its targets (a fall, a fast turn) is solved further, within
             # the same per-frame bounds, instead of carrying the lag into the next frames.
+            # The recent median does not change within a frame.
+            lag_limit = float(np.median(recent)) + self.settings.catch_up_margin_m if recent else np.inf
             extra = 0
-            while extra < self.settings.catch_up_iterations and self._lagging(t, recent):
+            while extra < self.settings.catch_up_iterations and self._keypoint_error(t) > lag_limit:
                 self._iterate(self.tasks)
                 extra += 1
             recent.append(self._keypoint_error(t))

@@ -61,12 +61,21 @@ class BodyHulls:
         lowest = np.empty((body_pos_w.shape[0], len(self.body_names)))
         for k, (body, points, radii) in enumerate(zip(self.body_names, self.points, self.radii)):
             i = index[body]
-            z_row = rotation_z_row(body_quat_w[:, i])
-            lowest[:, k] = body_pos_w[:, i, 2] + (z_row @ points.T - radii).min(axis=1)
+            lowest[:, k] = support_lowest_z(body_pos_w[:, i], body_quat_w[:, i], points, radii)
         return lowest
 
 
-def rotation_z_row(quat_wxyz: np.ndarray) -> np.ndarray:
+def support_lowest_z(
+    pos_w: np.ndarray, quat_w: np.ndarray, points: np.ndarray, radii: np.ndarray | float,
+) -> np.ndarray:
+    """(T,) lowest world z of one body's support points (V, 3), grown by `radii`, at poses (T, 3), (T, 4 wxyz).
+
+    Only world z is needed, so only the third row of each rotation matrix.
+    """
+    return pos_w[:, 2] + (_rotation_z_row(quat_w) @ points.T - radii).min(axis=1)
+
+
+def _rotation_z_row(quat_wxyz: np.ndarray) -> np.ndarray:
     """(T, 3) third row of the rotation matrix of unit quaternions (T, 4 wxyz): world z of body axes."""
     quat = quat_wxyz / np.linalg.norm(quat_wxyz, axis=-1, keepdims=True)
     w = quat[..., 0]

@@ -117,6 +117,18 @@ def collision_geoms(model: mujoco.MjModel, body_id: int) -> list[int]:
     return colliding or geoms
 
 
+def collision_geom_pairs(robot: Robot) -> np.ndarray:
+    """(P, 2) geom pairs of the config's `collision_pairs` (every collision geom of one body against the other's)."""
+    model = robot.model
+    pairs = [
+        (first, second)
+        for body_a, body_b in robot.config.collision_pairs
+        for first in collision_geoms(model, robot.body_ids[body_a])
+        for second in collision_geoms(model, robot.body_ids[body_b])
+    ]
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2)
+
+
 def leg_joints(robot: Robot) -> list[str]:
     """Config joints on the chains from the root body to the feet, in config order."""
     model = robot.model
