@@ -267,3 +267,18 @@ def test_pelvis_height_and_divergence_rulers(g1) -> None:
     assert quality["diverged_frames"] == 3
     assert quality["keypoint_error_max_mm"] == pytest.approx(1000.0 * np.sqrt(3 * 0.51**2), abs=1e-3)
     assert quality["root_speed_p999_m_s"] == 0.0
+
+
+def test_a_geom_the_floor_ruler_cannot_measure_is_named() -> None:
+    """An ellipsoid on a robot body is refused in one line that names the geom and the body."""
+    robot = load_robot("g1")
+    spec = mujoco.MjSpec.from_string(
+        '<mujoco><worldbody><body name="torso"><freejoint/><geom name="belly" type="ellipsoid" size="0.1 0.2 0.3"/>'
+        "</body></worldbody></mujoco>"
+    )
+    broken = dataclasses.replace(robot, model=spec.compile(), config=dataclasses.replace(robot.config, foot_bodies=()))
+    with pytest.raises(PipelineError) as error:
+        BodyHulls.from_robot(broken)
+    assert str(error.value) == (
+        "robot model: collision geom belly of body 'torso' is a mjGEOM_ELLIPSOID, which the floor ruler cannot measure"
+    )

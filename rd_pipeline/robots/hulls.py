@@ -14,6 +14,7 @@ import mujoco
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.model import collision_geoms
 
@@ -121,7 +122,12 @@ def _geom_support(model: mujoco.MjModel, geom: int) -> tuple[np.ndarray, np.ndar
         rim = size[0] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
         points = np.concatenate([np.column_stack([rim, np.full(_RIM_POINTS, z)]) for z in (-size[1], size[1])])
         return _to_body(model, geom, points), np.zeros(len(points))
-    raise ValueError(f"geom {geom} of type {kind} has no lowest-point support")
+    name = model.geom(geom).name or f"#{geom}"
+    body = model.body(model.geom_bodyid[geom]).name
+    shape = mujoco.mjtGeom(kind).name
+    raise PipelineError(
+        f"robot model: collision geom {name} of body '{body}' is a {shape}, which the floor ruler cannot measure"
+    )
 
 
 def _body_geoms(model: mujoco.MjModel, body: int) -> list[int]:
