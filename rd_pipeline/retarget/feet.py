@@ -9,6 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from rd_pipeline.motion.contact import contact_runs
 from rd_pipeline.retarget.frames import yaw_and_pitch, yaw_pitch_frame
+from rd_pipeline.retarget.settings import PlantDrift
 from rd_pipeline.retarget.smoothing import smoothstep
 from rd_pipeline.robots import Robot
 
@@ -16,10 +17,15 @@ from rd_pipeline.robots import Robot
 def plant_foot(
     free: np.ndarray, forward: np.ndarray, human_rotation: np.ndarray, contact: np.ndarray, sole_vertices: np.ndarray,
     fps: float, clearance: float, lift_time_s: float, pelvis_yaw: np.ndarray, yaw_range: tuple[float, float],
-    tilt_limit: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    tilt_limit: float, drift: PlantDrift, human_path: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Foot targets: fixed and flat while planted; in swing, the human path bent to meet the plants.
-    Returns positions, rotations and the height the sole clears the floor by (0 while planted).
+    Returns positions, rotations, the height the sole clears the floor by (0 while planted) and
+    the contact labels the plants were made from.
+
+    A plant ends where the foot target has drifted `drift.target_m` from it while the human foot
+    (`human_path`, scaled like the pelvis) has slid `drift.human_m` (a shuffle step too low and
+    slow to lift the contact label): a short swing carries the foot to a new plant.
 
     Swing orientation follows the human foot joint (its toe line is useless as a heading when the
     foot points down), through the constant offset that makes it flat and aligned during plants.
@@ -31,6 +37,8 @@ def plant_foot(
     planted_weight = np.zeros(n)
     lift = np.zeros(n)
     anchors = []
+    half_swing = max(1, int(round(0.5 * drift.swing_s * fps)))
+    contact = _split_drifting_plants(contact, free, human_path, drift, half_swing)
     for start, end in contact_runs(contact):
         anchors.append((start, end, np.array([*free[start, :2], sole])))
         position[start:end] = anchors[-1][2]
@@ -95,7 +103,33 @@ def plant_foot(
     # near the floor would otherwise drag along it.
     depth = -np.einsum("tij,vj->tvi", rotation, sole_vertices)[..., 2].min(axis=1)
     position[:, 2] = np.maximum(position[:, 2], lift + depth)
-    return position, rotation, lift
+    return position, rotation, lift, contact
+
+
+def _split_drifting_plants(
+    contact: np.ndarray, free: np.ndarray, path: np.ndarray, drift: PlantDrift, gap: int,
+) -> np.ndarray:
+    """Contact with a swing of 2 x `gap` frames cut into every plant the foot drifts out of.
+
+    Both the target (the scaled limb chain, which decides what the leg can reach) and the human
+    foot must have moved: the chain alone drifts while a still human foot pivots under a lunge.
+    """
+    contact = contact.copy()
+    for start, end in contact_runs(contact.copy()):
+        anchor = free[start, :2]
+        human = path[start, :2]
+        t = start
+        while t < end:
+            drifted = np.linalg.norm(free[t, :2] - anchor) > drift.target_m
+            moved = np.linalg.norm(path[t, :2] - human) > drift.human_m
+            if drifted and moved and t - gap > start and t + gap < end:
+                contact[t - gap:t + gap] = False
+                anchor = free[t + gap, :2]
+                human = path[t + gap, :2]
+                start = t + gap
+                t = start
+            t += 1
+    return contact
 
 
 def _wrap(angle: float) -> float:

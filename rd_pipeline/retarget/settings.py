@@ -8,6 +8,18 @@ from rd_pipeline.motion.contact import ContactThresholds
 
 
 @dataclass(frozen=True)
+class PlantDrift:
+    """A plant ends, and a short swing moves the foot, once both of these have moved since it began."""
+
+    target_m: float = 0.10
+    """The foot target of the scaled limb chain, horizontally."""
+    human_m: float = 0.05
+    """The human foot (scaled like the pelvis), horizontally."""
+    swing_s: float = 0.4
+    """Length of the swing that moves the foot to its next plant."""
+
+
+@dataclass(frozen=True)
 class TargetShaping:
     """How the human motion is shaped into robot targets."""
 
@@ -23,6 +35,8 @@ class TargetShaping:
     """Feet never come sideways closer than this fraction of the robot's rest stance (crossed legs are opened)."""
     planted_tilt_rad: float = 0.35
     """A planted human foot tilted more than this (kneeling, heel up) takes on the human's tilt, fully at twice it."""
+    plant_drift: PlantDrift = PlantDrift()
+    """When a long plant is cut by a short swing (a shuffle step the contact label missed)."""
 
 
 @dataclass(frozen=True)

@@ -156,10 +156,11 @@ def build_targets(
     foot_lift = np.zeros((human_pos.shape[0], 2))
     for side, (foot, toe) in enumerate(zip(FEET, TOES)):
         forward = human_pos[:, index[toe]] - human_pos[:, index[foot]]
-        position, rotation, foot_lift[:, side] = plant_foot(
+        position, rotation, foot_lift[:, side], contact[:, side] = plant_foot(
             targets[foot], forward, human_rot[:, index[foot]], contact[:, side], foot_vertices[side], fps,
             shape.swing_clearance_m, shape.swing_lift_time_s, pelvis_yaw, leg_yaw_range(robot, body_for[foot]),
-            shape.planted_tilt_rad,
+            shape.planted_tilt_rad, shape.plant_drift,
+            0.5 * (human_pos[:, index[foot]] + human_pos[:, index[toe]]) * root_scale,
         )
         targets[foot] = position
         offset = robot_rest_rotation(robot, body_for[foot])
