@@ -67,8 +67,8 @@ def raw_warp_steps_per_s(backend, steps: int) -> float:
     """`mujoco_warp.step` on the backend's batched model and data, 10 steps per launch (a CUDA graph
     on a GPU, as the environment does), without any read-back."""
     wp, mjw = backend.wp, backend.mjw
-    with wp.ScopedDevice(backend.device):
-        if backend.device.startswith("cuda"):
+    with wp.ScopedDevice(backend.warp_device):
+        if backend.warp_device.startswith("cuda"):
             with wp.ScopedCapture() as capture:
                 for _ in range(10):
                     mjw.step(backend.model, backend.data)
@@ -91,6 +91,7 @@ def main() -> None:
     parser.add_argument("--envs", type=int, default=64)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--backend", choices=("cpu", "warp"), default="cpu")
+    parser.add_argument("--device", default="cpu", help="torch device: cpu, or cuda with --backend warp")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--out", type=Path, default=Path("bench/results/env_throughput.json"))
     args = parser.parse_args()
@@ -100,9 +101,9 @@ def main() -> None:
                                       ContactThresholds()).reference
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
     sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=0)
-    config = EnvConfig(num_envs=args.envs, threads=args.threads, backend=args.backend)
+    config = EnvConfig(num_envs=args.envs, threads=args.threads, backend=args.backend, device=args.device)
     env = TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=0)
-    zero = torch.zeros(args.envs, env.num_actions)
+    zero = torch.zeros(args.envs, env.num_actions, device=env.device)
     env_rates, raw_rates = [], []
     for _ in range(args.repeats):  # interleaved, so both see the same machine state
         began = time.perf_counter()
@@ -111,7 +112,7 @@ def main() -> None:
         env_rates.append(args.envs * 50 * config.decimation / (time.perf_counter() - began))
         raw_rates.append(raw_warp_steps_per_s(env.backend, 500) if args.backend == "warp"
                          else raw_physics_steps_per_s(env.backend.models, env.backend.datas, args.threads, 500))
-    ppo = build_ppo(env.get_observations(), args.envs, env.num_actions, len(GROUPS), PpoConfig())
+    ppo = build_ppo(env.get_observations(), args.envs, env.num_actions, len(GROUPS), PpoConfig(), args.device)
     obs = env.get_observations()
     began = time.perf_counter()
     iterations = 3

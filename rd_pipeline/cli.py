@@ -155,11 +155,15 @@ class Sweep:
 
 @dataclass(frozen=True, kw_only=True)
 class Ablate(Sweep):
-    """One of the paper's ablations as a sweep: `residual` (none / all / selective) or `sampler`
-    (uniform / distribution / failure / combined), reduced to its table (markdown + JSON)."""
+    """One of the paper's ablations as a sweep, reduced to its table (markdown + JSON): `residual`
+    (Table r5's masks absolute / selective / hip_knee_ankle / all_legs / legs_torso / all, plus
+    reference_locked) or `sampler` (uniform / distribution / failure / combined)."""
 
     study: tyro.conf.Positional[Literal["residual", "sampler"]]
     """Which study."""
+    arms: tuple[str, ...] = ()
+    """Arms to run (default: all of the study's); residual: absolute, selective, hip_knee_ankle,
+    all_legs, legs_torso, all, reference_locked; sampler: uniform, distribution, failure, combined."""
 
 
 def main(argv: list[str] | None = None) -> int:

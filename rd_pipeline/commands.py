@@ -13,6 +13,7 @@ from rich.table import Table
 
 from rd_pipeline import paths
 from rd_pipeline.artifacts.runner import Pipeline, execute, resolve_source, stage_status
+from rd_pipeline.artifacts.stage import build_params
 from rd_pipeline.artifacts.store import ArtifactStore
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.params import layered_params
@@ -35,6 +36,8 @@ def _pipeline(robot, motion, profile, source, params_file, assignments, seed=Non
 
         load_robot_config(robot)  # unknown robot: one clear line before anything else
     values = layered_params(profile, names, params_file, assignments)
+    for stage in registry:  # every value is checked now, also for stages this command will not run
+        build_params(stage, values.get(stage.name, {}))
     if seed is not None:
         for stage in registry:
             if "seed" in {f.name for f in dataclasses.fields(stage.params)}:
@@ -213,10 +216,15 @@ def ablate(cmd: Ablate, console: Console) -> int:
     from rd_pipeline.sweeps.ablation import STUDIES, ablation_table, write_ablation
     from rd_pipeline.sweeps.runner import make_trials
 
-    variants = {arm: cmd.set + sets for arm, sets in STUDIES[cmd.study].items()}
+    arms = STUDIES[cmd.study]
+    unknown = [arm for arm in cmd.arms if arm not in arms]
+    if unknown:
+        raise PipelineError(f"--arms {unknown[0]}: not an arm of the {cmd.study} study (arms: {', '.join(arms)})")
+    chosen = cmd.arms or tuple(arms)
+    variants = {arm: cmd.set + arms[arm] for arm in chosen}
     trials = make_trials(list(cmd.robots), list(cmd.motions), list(cmd.seeds), variants)
     results, out = _run_trials(cmd, trials, f"ablate-{cmd.study}", console)
-    path = write_ablation(cmd.study, ablation_table(cmd.study, results), results, out)
+    path = write_ablation(cmd.study, ablation_table(cmd.study, chosen, results), results, out)
     console.print(path.read_text(), highlight=False)
     console.print(f"wrote {path}")
     return 0 if all(r.ok for r in results) else 1

@@ -57,7 +57,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="export",
-    version=1,
+    version=2,
     description="trained actor -> policy.pt (TorchScript) + policy.json (gains, scales, mask, obs layout, rates)",
     params=ExportParams,
     provides="deployable_policy",

@@ -78,9 +78,9 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     reference = reference.frames(start, end)
     starts, lengths, weights = starts[keep] - start, lengths[keep], weights[keep]
     balanced = torch.as_tensor(weights if weights.sum() > 0 else np.ones(len(weights)))
-    sampler = SegmentSampler(p.sampler, balanced, seed=p.seed)
+    sampler = SegmentSampler(p.sampler, balanced, seed=p.seed, device=p.env.device)
     env = TrackingEnv(robot, reference, sampler, starts, lengths, p.env, seed=p.seed)
-    ppo = build_ppo(env.get_observations(), env.num_envs, env.num_actions, len(GROUPS), p.ppo)
+    ppo = build_ppo(env.get_observations(), env.num_envs, env.num_actions, len(GROUPS), p.ppo, p.env.device)
     observation_size = int(env.get_observations()["policy"].shape[1])
     # Checkpoints and the log live in the work folder, which survives an interruption; --resume
     # continues from its newest checkpoint, and a fresh run starts it over.
@@ -117,7 +117,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="train",
-    version=2,
+    version=3,
     description="reference + prior -> residual-action PPO policy (multi-head critic, segment sampler)",
     params=TrainParams,
     provides="policy",

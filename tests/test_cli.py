@@ -34,6 +34,24 @@ def test_every_subcommand_has_help(command: str) -> None:
     assert result.returncode == 0 and "usage:" in result.stdout.lower()
 
 
+def test_ablate_help_lists_the_residual_presets() -> None:
+    result = cli("ablate", "--help")
+    assert result.returncode == 0, result.stderr
+    text = " ".join(result.stdout.split())
+    for preset in ("absolute", "selective", "hip_knee_ankle", "all_legs", "legs_torso", "all", "reference_locked"):
+        assert preset in text, preset
+
+
+def test_a_choice_outside_its_literal_is_refused_when_params_are_read(artifacts: Path) -> None:
+    result = cli("run", "--until", "parse", "--set", "train.env.actions.mode=half")
+    assert result.returncode != 0
+    assert result.stderr.strip().splitlines()[-1] == (
+        "error: parameter 'train.env.actions.mode' must be one of absolute, selective, hip_knee_ankle, all_legs, "
+        "legs_torso, all, reference_locked, got 'half'"
+    )
+    assert not (artifacts / "parse").exists()  # refused before any stage ran
+
+
 def test_fetch_lafan_rejects_a_wrong_archive(tmp_path: Path) -> None:
     archive = tmp_path / "lafan1.zip"
     with zipfile.ZipFile(archive, "w") as handle:

@@ -92,17 +92,21 @@ def test_exported_module_matches_the_training_actor(tmp_path: Path) -> None:
         expected = ppo.actor(TensorDict({"policy": observations}, batch_size=[1000]),
                              stochastic_output=False)
         exported = loaded(observations)
-    assert exported.shape == (1000, 4)
+    assert exported.shape == (1000, 23)  # selective: every G1 policy joint has an output
     assert (exported - expected).abs().max().item() <= 1e-5
     assert expected.abs().max().item() > 0.01  # a real, non-trivial actor
 
 
 def test_policy_json_names_the_missing_field(tmp_path: Path) -> None:
     robot = load_robot("g1")
-    spec = build_policy_spec(robot, dataclasses.asdict(EnvConfig()), 4, "retarget", "abc", (0, 500))
+    spec = build_policy_spec(robot, dataclasses.asdict(EnvConfig()), 23, "retarget", "abc", (0, 500))
     path = tmp_path / "policy.json"
     spec.save(path)
-    assert load_policy_spec(path).get("action.residual_mask") == [0, 3, 6, 9]
+    loaded = load_policy_spec(path)
+    assert loaded.get("action.residual_mask") == [0, 3, 6, 9]
+    semantics = loaded.get("action.semantics")
+    assert [i for i, kind in enumerate(semantics) if kind == "residual"] == [0, 3, 6, 9]
+    assert semantics.count("absolute") == 19 and len(loaded.get("action.outputs")) == 23
     data = json.loads(path.read_text())
     del data["action"]["scale"]
     path.write_text(json.dumps(data))

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 import torch
 
-from rd_pipeline.rl.actions import ActionConfig, ResidualActions
+from rd_pipeline.rl.actions import RESIDUAL_PRESETS, ActionConfig, ResidualActions, joint_semantics
 from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
 from rd_pipeline.rl.backend import MujocoCpuBackend
-from rd_pipeline.rl.rewards import GROUPS, AdaptiveSigma, RewardIndices, RewardLimits, TrackingState, compute_rewards
+from rd_pipeline.rl.reward_terms import TermContext, TrackingState
+from rd_pipeline.rl.rewards import GROUPS, AdaptiveSigma, RewardManager, RewardsCfg
 from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
 
@@ -39,15 +40,20 @@ def _state(**changes) -> TrackingState:
     return TrackingState(**values)
 
 
-INDICES = RewardIndices(root=0, feet=(3, 4), keypoints=(1, 2))
-LIMITS = RewardLimits(
+CONTEXT = TermContext(
+    root=0, feet=(3, 4), keypoints=(1, 2),
     joint_lower=torch.full((P,), -1.0, dtype=torch.float64), joint_upper=torch.full((P,), 1.0, dtype=torch.float64),
-    joint_velocity=torch.full((P,), 10.0, dtype=torch.float64), torque=torch.full((P,), 50.0, dtype=torch.float64),
+    velocity_limit=torch.full((P,), 10.0, dtype=torch.float64), effort_limit=torch.full((P,), 50.0, dtype=torch.float64),
 )
+MANAGER = RewardManager(RewardsCfg(), CONTEXT)
+
+
+def compute_rewards(state, penalty_scale, sigma=None):
+    return MANAGER.compute(state, penalty_scale, sigma)
 
 
 def test_perfect_tracking_earns_every_tracking_weight() -> None:
-    groups, terms, _ = compute_rewards(_state(), INDICES, LIMITS, penalty_scale=0.8)
+    groups, terms, _ = compute_rewards(_state(), penalty_scale=0.8)
     assert GROUPS == ("body", "root", "joint", "contact", "regularization")
     expected = {"body": 2.0 + 0.5 + 1.8 + 0.5 + 2.0 + 0.5 + 0.5 + 0.5 + 0.5, "root": 2.25, "joint": 1.5,
                 "contact": 0.5, "regularization": 0.0}
@@ -75,7 +81,7 @@ def test_hand_computed_terms() -> None:
     reference_contact[2, 1] = False
     state = _state(body_pos=body, joint_pos=joints, torque=torque, feet_force=force, terminated=terminated,
                    body_quat=quat, feet_air_time=air, ref_feet_contact=reference_contact)
-    _, terms, _ = compute_rewards(state, INDICES, LIMITS, penalty_scale=0.8)
+    _, terms, _ = compute_rewards(state, penalty_scale=0.8)
     assert torch.allclose(terms["body_pos"], torch.full((N,), 2.0 * math.exp(-1.0), dtype=torch.float64))
     assert torch.allclose(terms["body_pos_rel"], torch.full((N,), 0.5, dtype=torch.float64))  # a shift is not a pose error
     assert torch.allclose(terms["joint_pos"], torch.full((N,), 1.0 * math.exp(-1.0), dtype=torch.float64))
@@ -91,15 +97,15 @@ def test_hand_computed_terms() -> None:
 def test_adaptive_sigma_follows_the_error_and_never_widens() -> None:
     body = _state().body_pos.clone()
     body[:, :, 0] += 0.01  # e = 1e-4, a quarter of the table's sigma^2 = 4e-4
-    adaptive = AdaptiveSigma(alpha=0.5)
-    _, _, errors = compute_rewards(_state(body_pos=body), INDICES, LIMITS, 1.0)
+    adaptive = AdaptiveSigma(alpha=0.5, table_sigmas=MANAGER.tracking_sigmas())
+    _, _, errors = compute_rewards(_state(body_pos=body), 1.0)
     adaptive.update(errors)
     assert adaptive.sigma()["body_pos"] == pytest.approx(math.sqrt(0.5 * 4e-4 + 0.5 * 1e-4))
-    _, terms, _ = compute_rewards(_state(body_pos=body), INDICES, LIMITS, 1.0, sigma=adaptive.sigma())
+    _, terms, _ = compute_rewards(_state(body_pos=body), 1.0, sigma=adaptive.sigma())
     assert terms["body_pos"][0].item() == pytest.approx(2.0 * math.exp(-1e-4 / 2.5e-4))
     body[:, :, 0] += 1.0  # far worse tracking: the kernel stays at the table width
     for _ in range(20):
-        adaptive.update(compute_rewards(_state(body_pos=body), INDICES, LIMITS, 1.0)[2])
+        adaptive.update(compute_rewards(_state(body_pos=body), 1.0)[2])
     assert adaptive.sigma()["body_pos"] == pytest.approx(0.02)
 
 def _single_head_gae(rewards, values, dones, last, gamma, lam):
@@ -128,28 +134,61 @@ def test_multi_head_gae_is_per_head_gae() -> None:
     assert torch.allclose(combined, (summed - summed.mean()) / (summed.std() + 1e-8))
 
 
-def test_residual_mask_clip_and_limits() -> None:
+PRESET_RESIDUAL_JOINTS = {
+    # Policy joints with residual semantics per preset: G1 (23 policy joints), H1 (19), H1-2 (21).
+    "g1": {"absolute": 0, "selective": 4, "hip_knee_ankle": 8, "all_legs": 12, "legs_torso": 13, "all": 23,
+           "reference_locked": 4},
+    "h1": {"absolute": 0, "selective": 4, "hip_knee_ankle": 6, "all_legs": 10, "legs_torso": 11, "all": 19,
+           "reference_locked": 4},
+    "h1_2": {"absolute": 0, "selective": 4, "hip_knee_ankle": 8, "all_legs": 12, "legs_torso": 13, "all": 21,
+             "reference_locked": 4},
+}
+
+
+@pytest.mark.parametrize("robot_name", ["g1", "h1", "h1_2"])
+def test_every_preset_forms_residual_and_absolute_targets_per_joint(robot_name: str) -> None:
+    robot = load_robot(robot_name)
+    config = robot.config
+    policy = config.policy_indices
+    lower, upper = (torch.as_tensor(x[policy]) for x in robot.joint_range.T)
+    default = torch.tensor(config.default_pos)[policy]
+    reference = (lower + upper) / 2 + 0.05  # inside the limits, away from the default pose
+    assert RESIDUAL_PRESETS == tuple(PRESET_RESIDUAL_JOINTS[robot_name])
+    for preset, residual_count in PRESET_RESIDUAL_JOINTS[robot_name].items():
+        semantics = joint_semantics(config, preset)
+        residual = torch.tensor([kind == "residual" for kind in semantics])
+        absolute = torch.tensor([kind == "absolute" for kind in semantics])
+        assert int(residual.sum()) == residual_count, preset
+        actions = ResidualActions(ActionConfig(mode=preset), semantics, default, lower, upper)
+        # The action has the full policy dimension except in the reference-locked reading.
+        assert actions.size == (residual_count if preset == "reference_locked" else len(policy)), preset
+        a = torch.linspace(-0.4, 0.4, actions.size, dtype=torch.float64).repeat(2, 1)
+        targets = actions.targets(a, reference.repeat(2, 1))
+        expected = torch.where(absolute, default, reference).repeat(2, 1)
+        expected[:, actions.outputs] += 0.25 * a
+        expected = torch.clamp(expected, lower, upper)
+        assert torch.allclose(targets, expected), preset
+        if preset == "reference_locked":
+            assert torch.equal(targets[:, ~residual], reference.repeat(2, 1)[:, ~residual])
+    hip_pitch = config.policy_joints.index("left_hip_pitch_joint")
+    elbow = config.policy_joints.index("left_elbow_joint")
+    selective = joint_semantics(config, "selective")
+    assert selective[hip_pitch] == "residual" and selective[elbow] == "absolute"
+
+
+def test_actions_are_clipped_then_projected_to_the_limits() -> None:
     robot = load_robot("g1")
     config = robot.config
-    mask = torch.zeros(len(config.policy_joints), dtype=torch.bool)
-    mask[list(config.residual_indices)] = True
     lower, upper = (torch.as_tensor(x) for x in robot.joint_range.T)
     default = torch.tensor(config.default_pos)
     reference = default.repeat(2, 1)
-    actions = torch.full((2, len(mask)), 0.4, dtype=torch.float64)
+    actions = torch.full((2, len(default)), 0.4, dtype=torch.float64)
     actions[1] = 1e6  # far beyond the clip
-    residual = ResidualActions(ActionConfig(), mask, default, lower, upper)
-    assert residual.active.tolist() == list(config.residual_indices)  # the policy outputs only masked joints
-    selective = residual.targets(actions[:, : residual.size], reference)
-    assert torch.equal(selective[:, ~mask], reference[:, ~mask])  # masked-out joints follow the reference
-    assert torch.allclose(selective[0, mask], reference[0, mask] + 0.25 * 0.4)
-    assert torch.all(selective <= upper) and torch.all(selective >= lower)
-    everything = ResidualActions(ActionConfig(mode="all", clip=1.0), mask, default, lower, upper).targets(actions, reference)
-    assert torch.allclose(everything[1], torch.minimum(reference[1] + 0.25, upper))
-    absolute = ResidualActions(ActionConfig(mode="none"), mask, default, lower, upper).targets(actions, reference + 1.0)
-    assert torch.allclose(absolute[0], torch.clamp(default + 0.1, lower, upper))
-    with pytest.raises(ValueError, match="action mode must be one of"):
-        ResidualActions(ActionConfig(mode="half"), mask, default, lower, upper)
+    semantics = joint_semantics(config, "all")
+    everything = ResidualActions(ActionConfig(mode="all", clip=1.0), semantics, default, lower, upper)
+    targets = everything.targets(actions, reference)
+    assert torch.allclose(targets[1], torch.minimum(reference[1] + 0.25, upper))
+    assert torch.all(targets <= upper) and torch.all(targets >= lower)
 
 
 def test_pd_torque_is_clipped_inside_the_physics_loop() -> None:
@@ -171,7 +210,26 @@ def test_a_push_changes_only_the_pushed_base_velocity() -> None:
     backend = MujocoCpuBackend([model, model], threads=1)
     qpos = np.tile(model.qpos0, (2, 1))
     qpos[:, 2] = 1.0
-    backend.set_state(np.arange(2), qpos, np.zeros((2, model.nv)))
-    backend.push(np.array([1]), np.array([[0.3, -0.2]]))
+    backend.set_state(torch.arange(2), torch.from_numpy(qpos), torch.zeros(2, model.nv, dtype=torch.float64))
+    backend.push(torch.tensor([1]), torch.tensor([[0.3, -0.2]], dtype=torch.float64))
     assert backend.datas[1].qvel[:3].tolist() == pytest.approx([0.3, -0.2, 0.0])
     assert not backend.datas[0].qvel.any()
+
+
+def test_the_copied_rsl_rl_methods_match_the_installed_library() -> None:
+    """`MultiHeadPPO` re-implements rsl-rl methods; a library update must be read before it is used."""
+    import hashlib
+    import inspect
+
+    from rsl_rl.algorithms import PPO
+    from rsl_rl.storage import RolloutStorage
+
+    from rd_pipeline.rl.ppo import UPSTREAM_SOURCES
+
+    methods = {"PPO": PPO, "RolloutStorage": RolloutStorage}
+    for name, digest in UPSTREAM_SOURCES.items():
+        owner, method = name.split(".")
+        source = inspect.getsource(getattr(methods[owner], method))
+        assert hashlib.sha256(source.encode()).hexdigest() == digest, (
+            f"rsl-rl-lib's {name} changed: compare it with rd_pipeline/rl/ppo.py, then update UPSTREAM_SOURCES"
+        )

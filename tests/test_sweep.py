@@ -35,16 +35,16 @@ def test_ray_sweep_reports_a_failing_trial_and_finishes_the_others(artifacts: Pa
 
 def test_ablate_residual_writes_the_paper_table(artifacts: Path) -> None:
     result = cli("ablate", "residual", "--robots", "g1", "--motions", "dance1_subject2", "--seeds", "0",
-                 "--set", *FAST)
+                 "--arms", "absolute", "all", "selective", "--set", *FAST)
     assert result.returncode == 0, result.stderr
     (folder,) = (artifacts / "sweeps").iterdir()
     table = json.loads((folder / "ablation.json").read_text())
-    assert list(table["table"]) == ["none", "all", "selective"] and table["failed_trials"] == []
+    assert list(table["table"]) == ["absolute", "all", "selective"] and table["failed_trials"] == []
     for arm in table["table"].values():
         assert arm["E_g_mpbpe"]["n"] == 1 and arm["E_g_mpbpe"]["mean"] > 0 and arm["E_g_mpbpe"]["ci95"] is None
     markdown = (folder / "ablation.md").read_text()
     assert "| selective |" in markdown and "E_mpjve" in markdown
     summary = json.loads((folder / "summary.json").read_text())
-    assert sorted(row["variant"] for row in summary) == ["all", "none", "selective"]
-    # The baseline is the reference fed to PD in every arm, `none` (absolute actions) included.
+    assert sorted(row["variant"] for row in summary) == ["absolute", "all", "selective"]
+    # The baseline is the reference fed to PD in every arm, `absolute` included.
     assert len({row["zero_action_start_zero_survival_s"] for row in summary}) == 1

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,9 @@ import pytest
 import torch
 from conftest import RETARGETED_DIR, cli
 
+from rd_pipeline.artifacts.stage import build_params
 from rd_pipeline.motion.contact import ContactThresholds
+from rd_pipeline.params import parse_assignments
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig
@@ -20,16 +23,17 @@ from rd_pipeline.rl.trainer import load_checkpoint, train
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
 from rd_pipeline.sampling.segments import segment_bounds
+from stages import REGISTRY
 
 
-def _setup(seed: int = 3):
+def _setup(seed: int = 3, config: EnvConfig = EnvConfig(num_envs=4, threads=2)):
     torch.manual_seed(seed)
     robot = load_robot("h1_2")
     reference = import_retargeted_csv(RETARGETED_DIR / "h1_2" / "dance2_subject4.csv", robot, 30.0, 50.0, "cubic",
                                       ContactThresholds()).reference
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
     sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=seed)
-    env = TrackingEnv(robot, reference, sampler, starts, lengths, EnvConfig(num_envs=4, threads=2), seed=seed)
+    env = TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=seed)
     ppo = build_ppo(env.get_observations(), env.num_envs, env.num_actions, len(GROUPS), PpoConfig(steps_per_env=6))
     return env, ppo
 
@@ -61,15 +65,66 @@ def test_zero_action_environment_tracks_and_terminates() -> None:
     assert lengths and 1 <= np.mean(lengths) < 60
 
 
+def test_a_reward_weight_and_a_termination_threshold_set_on_the_command_line_change_key_and_behaviour(
+    artifacts: Path,
+) -> None:
+    changes = {
+        "default": (),
+        "weight": ("train.env.rewards.body_pos.weight=3.0",),
+        "limit": ("train.env.terminations.orientation_limit_rad=0.05",),
+    }
+    keys = {}
+    for label, sets in changes.items():
+        result = cli("status", "--robot", "g1", "--motion", "dance1_subject2", "--json", *(("--set", *sets) if sets else ()))
+        assert result.returncode == 0, result.stderr
+        stages = json.loads(result.stdout)["pipelines"][0]["stages"]
+        keys[label] = {row["stage"]: row["key"] for row in stages}
+    assert keys["default"]["retarget"] == keys["weight"]["retarget"] == keys["limit"]["retarget"]
+    assert len({keys[label]["train"] for label in changes}) == 3
+
+    stage = next(s for s in REGISTRY if s.name == "train")
+    configs = {label: build_params(stage, parse_assignments(sets, ["train"]).get("train", {})).env
+               for label, sets in changes.items()}
+    configs = {label: replace(config, num_envs=4, threads=2) for label, config in configs.items()}
+    assert configs["weight"].rewards.body_pos.weight == 3.0
+    rollouts = {}
+    for label, config in configs.items():
+        env, _ = _setup(config=config)
+        terms = []
+        lengths = []
+        for _ in range(30):
+            _, _, _, extras = env.step(torch.zeros(env.num_envs, env.num_actions))
+            terms.append(extras["log"]["reward/body_pos"])
+            lengths += extras["episode_length"].tolist()
+        rollouts[label] = (np.array(terms), lengths)
+        env.close()
+    # Same physics, same draws: only the term's weight differs, 3.0 against 2.0.
+    default_terms, default_lengths = rollouts["default"]
+    assert np.allclose(rollouts["weight"][0], 1.5 * default_terms, rtol=1e-5)
+    # A 0.05 rad tilt limit ends episodes at once; the default lets them run.
+    assert len(rollouts["limit"][1]) > len(default_lengths)
+    assert np.mean(rollouts["limit"][1]) < np.mean(default_lengths or [30])
+
+
 @pytest.mark.parametrize(("robot", "motion"), [("g1", "dance1_subject2"), ("h1", "dance1_subject1"),
                                                 ("h1_2", "dance2_subject4")])
-def test_smoke_profile_runs_the_dag_to_train(robot: str, motion: str, artifacts: Path) -> None:
-    result = cli("run", "--robot", robot, "--motion", motion, "--until", "train", "--profile", "smoke")
+def test_smoke_profile_runs_the_dag_to_export(robot: str, motion: str, artifacts: Path) -> None:
+    result = cli("run", "--robot", robot, "--motion", motion, "--until", "export", "--profile", "smoke")
     assert result.returncode == 0, result.stderr
     (folder,) = (artifacts / "train" / robot / motion).iterdir()
     assert (folder / "learning_curve.png").is_file() and (folder / "checkpoints" / "model_2.pt").is_file()
     metrics = json.loads((folder / "manifest.json").read_text())["metrics"]
     assert metrics["iterations"] == 2 and metrics["num_envs"] == 8
+    # The paper's selective residuals: one output per policy joint, residual on hip and knee pitch,
+    # absolute on every other joint.
+    (exported,) = (artifacts / "export" / robot / motion).iterdir()
+    action = json.loads((exported / "policy.json").read_text())["action"]
+    assert action["mode"] == "selective"
+    assert len(action["outputs"]) == {"g1": 23, "h1": 19, "h1_2": 21}[robot] == metrics["num_actions"]
+    residual = [joint for joint, kind in zip(action["outputs"], action["semantics"]) if kind == "residual"]
+    assert sorted(residual) == sorted(f"{side}_{joint}_joint" for side in ("left", "right")
+                                      for joint in ("hip_pitch", "knee"))
+    assert action["semantics"].count("absolute") == len(action["outputs"]) - 4
 
 
 def test_cli_resume_continues_an_interrupted_training(artifacts: Path) -> None:

@@ -6,6 +6,7 @@ import copy
 
 import numpy as np
 import pytest
+import torch
 from conftest import RETARGETED_DIR
 
 from rd_pipeline.motion.contact import ContactThresholds
@@ -38,18 +39,55 @@ def test_warp_backend_matches_c_mujoco_on_a_short_rollout() -> None:
     qpos[:, :3], qpos[:, 3:7] = reference.root_pos[frames], reference.root_quat[frames]
     qadr = [base.jnt_qposadr[base.joint(j).id] for j in robot.config.joint_names]
     qpos[:, qadr] = reference.joint_pos[frames]
-    c, warp = MujocoCpuBackend(models, threads=1), MujocoWarpBackend(models, device="cpu")
+    c = MujocoCpuBackend(models, threads=1)
+    warp = MujocoWarpBackend(models, device="cpu")
     for backend in (c, warp):
-        backend.set_state(np.arange(3), qpos, qvel)
+        backend.set_state(torch.arange(3), torch.from_numpy(qpos), torch.from_numpy(qvel))
     for step in range(CONTROL_STEPS):
-        ctrl = reference.joint_pos[frames + step + 1]
-        a, b = c.step(ctrl, 10), warp.step(ctrl, 10)
-    gap = np.abs(a.qpos - b.qpos).max()
+        ctrl = torch.from_numpy(reference.joint_pos[frames + step + 1])
+        c.step(ctrl, 10)
+        warp.step(ctrl, 10)
+    a = {name: getattr(c.state, name).numpy() for name in ("qpos", "body_pos", "actuator_force", "contact_force")}
+    b = {name: getattr(warp.state, name).numpy() for name in ("qpos", "body_pos", "actuator_force", "contact_force")}
+    gap = np.abs(a["qpos"] - b["qpos"]).max()
     assert gap < QPOS_TOLERANCE, gap
-    assert np.abs(a.body_pos - b.body_pos).max() < QPOS_TOLERANCE
-    assert np.allclose(a.actuator_force, b.actuator_force, atol=0.01)  # N m, PD torques of the last substep
-    assert a.contact_force[:, robot.model.body("left_ankle_roll_link").id, 2].min() > 10  # feet carry weight
-    assert np.allclose(a.contact_force.sum(axis=1)[:, 2], b.contact_force.sum(axis=1)[:, 2], rtol=1e-3)
+    assert np.abs(a["body_pos"] - b["body_pos"]).max() < QPOS_TOLERANCE
+    assert np.allclose(a["actuator_force"], b["actuator_force"], atol=0.01)  # N m, PD torques of the last substep
+    assert a["contact_force"][:, robot.model.body("left_ankle_roll_link").id, 2].min() > 10  # feet carry weight
+    assert np.allclose(a["contact_force"].sum(axis=1)[:, 2], b["contact_force"].sum(axis=1)[:, 2], rtol=1e-3)
     # The randomized world is heavier in Warp too: the ground carries about 10 % more.
-    vertical = b.contact_force.sum(axis=1)[:, 2]
+    vertical = b["contact_force"].sum(axis=1)[:, 2]
     assert 1.03 < vertical[1] / vertical[0] < 1.2
+
+
+def test_ppo_trains_through_the_warp_backend(tmp_path) -> None:
+    """A few PPO iterations end to end with physics in MuJoCo Warp (on Warp's CPU device here, on
+    a GPU in the `paper` profile): the same environment, state as torch tensors from Warp."""
+    import json
+
+    from rd_pipeline.rl.env import TrackingEnv
+    from rd_pipeline.rl.env_config import EnvConfig
+    from rd_pipeline.rl.ppo import PpoConfig, build_ppo
+    from rd_pipeline.rl.rewards import GROUPS
+    from rd_pipeline.rl.trainer import train
+    from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
+    from rd_pipeline.sampling.segments import segment_bounds
+
+    torch.manual_seed(0)
+    robot = load_robot("g1")
+    reference = import_retargeted_csv(RETARGETED_DIR / "g1" / "dance1_subject2.csv", robot, 30.0, 50.0, "cubic",
+                                      ContactThresholds()).reference.frames(0, 250)
+    starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
+    sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=0)
+    config = EnvConfig(num_envs=4, backend="warp", device="cpu")
+    env = TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=0)
+    assert env.backend.state.qpos.device.type == "cpu" and env.num_actions == 23
+    ppo = build_ppo(env.get_observations(), env.num_envs, env.num_actions, len(GROUPS), PpoConfig(steps_per_env=8))
+    before = {k: v.clone() for k, v in ppo.actor.state_dict().items()}
+    train(env, ppo, iterations=3, out_dir=tmp_path, checkpoint_every=3)
+    rows = [json.loads(line) for line in (tmp_path / "training_log.jsonl").read_text().splitlines()]
+    assert [row["iteration"] for row in rows] == [1, 2, 3]
+    assert all(np.isfinite(row["reward"]) and np.isfinite(row["loss_value"]) for row in rows)
+    assert any(not torch.equal(v, before[k]) for k, v in ppo.actor.state_dict().items())  # it learned something
+    assert (tmp_path / "checkpoints" / "model_3.pt").is_file()
+    env.close()

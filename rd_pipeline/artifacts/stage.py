@@ -8,6 +8,7 @@ of one source and orders them by these roles, so adding a stage never touches th
 from __future__ import annotations
 
 import dataclasses
+import typing
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -118,11 +119,16 @@ def _override(defaults: Any, values: dict[str, Any], prefix: str) -> Any:
     for name in [*flat, *nested]:
         if name not in known:
             raise PipelineError(f"unknown parameter '{prefix}.{name}' (known: {', '.join(known) or 'none'})")
+    hints = typing.get_type_hints(type(defaults))
     for name, value in flat.items():
         default = getattr(defaults, name)
         if dataclasses.is_dataclass(default):
             raise PipelineError(f"parameter '{prefix}.{name}' is a group; set its fields ({prefix}.{name}.<field>)")
         changes[name] = _coerce(f"{prefix}.{name}", value, default)
+        choices = typing.get_args(hints[name]) if typing.get_origin(hints[name]) is typing.Literal else ()
+        if choices and changes[name] not in choices:
+            raise PipelineError(f"parameter '{prefix}.{name}' must be one of {', '.join(map(str, choices))}, "
+                                f"got '{changes[name]}'")
     for name, group in nested.items():
         default = getattr(defaults, name)
         if not dataclasses.is_dataclass(default):

@@ -3,14 +3,13 @@
 It reads nothing but `policy.json`, the TorchScript policy, the reference motion and the robot's
 MJCF, the way a robot-side loop would: joint positions and velocities, the pelvis quaternion and
 angular velocity come from `qpos`/`qvel` by joint name, and the observation is assembled from the
-layout in `policy.json`. Many rollouts (one per start frame) run side by side; their physics steps
-run in threads, one policy call serves all of them.
+layout in `policy.json`. Many rollouts (one per start frame) run side by side in the same C MuJoCo
+backend that training uses on CPU (one physics implementation); one policy call serves all of them.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 
 import mujoco
 import numpy as np
@@ -31,14 +30,16 @@ def projected_gravity(quat_wxyz: np.ndarray) -> np.ndarray:
 
 def reference_baseline_spec(spec: PolicySpec) -> PolicySpec:
     """The zero-action baseline's spec: the reference fed straight to PD whatever the policy's
-    action mode (with `none`, a zero action would mean the default pose), i.e. zero residuals on
-    every policy joint, with the observation layout resized to match."""
+    action semantics (on an absolute joint, a zero action would mean the default pose), i.e. zero
+    residuals on every policy joint, with the observation layout resized to match."""
     joints = spec.get("joints.policy")
     observation = spec.get("observation")
     terms = [{**t, "size": len(joints)} if t["name"] == "last_action" else t for t in observation["terms"]]
     frame = sum(t["size"] for t in terms)
     return PolicySpec({
-        **spec.data, "action": {**spec.get("action"), "mode": "all", "outputs": joints},
+        **spec.data,
+        "action": {**spec.get("action"), "mode": "all", "outputs": joints, "semantics": ["residual"] * len(joints),
+                   "residual_mask": list(range(len(joints)))},
         "observation": {**observation, "terms": terms, "frame_size": frame, "size": frame * observation["history"]},
     })
 
@@ -58,6 +59,7 @@ class DeployController:
         self.default_policy = default[self.policy_in_actuated]
         self.lower, self.upper = np.asarray(joints["policy_lower"]), np.asarray(joints["policy_upper"])
         self.outputs = np.array([policy.index(j) for j in spec.get("action.outputs")])
+        self.on_reference = np.array([kind != "absolute" for kind in spec.get("action.semantics")])
         self.reference_joints = reference.joint_pos[:, [reference.joint_names.index(j) for j in policy]]
         self.terms = spec.get("observation.terms")
         self.history = spec.get("observation.history")
@@ -94,9 +96,7 @@ class DeployController:
     def targets(self, action: np.ndarray) -> np.ndarray:
         """(R, actuated) PD targets for this control step, per `policy.json`'s action block; advances the frame."""
         a = self.spec.get("action")
-        base = np.broadcast_to(self.default_policy, (self.rollouts, len(self.default_policy))) if a["mode"] == "none" \
-            else self.reference_joints[self._next_frame()]
-        policy_targets = base.copy()
+        policy_targets = np.where(self.on_reference, self.reference_joints[self._next_frame()], self.default_policy)
         policy_targets[:, self.outputs] += a["scale"] * np.clip(action, -a["clip"], a["clip"])
         policy_targets = np.clip(policy_targets, self.lower, self.upper)
         ctrl = np.tile(self.default_actuated, (self.rollouts, 1))
@@ -104,40 +104,3 @@ class DeployController:
         self.last_action = np.asarray(action, dtype=np.float64).copy()
         self.frame = self._next_frame()
         return ctrl
-
-
-class ParallelPhysics:
-    """R copies of one model, stepped in threads (MuJoCo releases the GIL inside `mj_step`)."""
-
-    def __init__(self, models: list[mujoco.MjModel], threads: int) -> None:
-        self.models = models
-        self.datas = [mujoco.MjData(m) for m in models]
-        self.pool = ThreadPoolExecutor(max(1, threads))
-        self.chunks = [c for c in np.array_split(np.arange(len(models)), max(1, threads)) if len(c)]
-
-    def set_state(self, i: int, qpos: np.ndarray, qvel: np.ndarray) -> None:
-        model, data = self.models[i], self.datas[i]
-        mujoco.mj_resetData(model, data)
-        data.qpos[:], data.qvel[:] = qpos, qvel
-        mujoco.mj_forward(model, data)
-
-    def step(self, ctrl: np.ndarray, substeps: int, active: np.ndarray) -> None:
-        def run(chunk: np.ndarray) -> None:
-            for i in chunk:
-                if active[i]:
-                    self.datas[i].ctrl[:] = ctrl[i]
-                    mujoco.mj_step(self.models[i], self.datas[i], nstep=substeps)
-                    mujoco.mj_kinematics(self.models[i], self.datas[i])
-                    mujoco.mj_comPos(self.models[i], self.datas[i])
-                    mujoco.mj_comVel(self.models[i], self.datas[i])
-
-        list(self.pool.map(run, self.chunks))
-
-    def qpos(self) -> np.ndarray:
-        return np.stack([d.qpos for d in self.datas])
-
-    def qvel(self) -> np.ndarray:
-        return np.stack([d.qvel for d in self.datas])
-
-    def close(self) -> None:
-        self.pool.shutdown()

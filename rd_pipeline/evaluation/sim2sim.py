@@ -12,12 +12,15 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+import torch
 
-from rd_pipeline.evaluation.deploy import DeployController, ParallelPhysics, Policy, projected_gravity
+from rd_pipeline.evaluation.deploy import DeployController, Policy
 from rd_pipeline.export.policy_spec import PolicySpec
 from rd_pipeline.motion.reference import ReferenceMotion
+from rd_pipeline.rl.backend import MujocoCpuBackend
 from rd_pipeline.rl.env_config import Randomization
 from rd_pipeline.rl.sim_model import randomized_copy
+from rd_pipeline.rl.terminations import bad_orientation, motion_far
 
 
 @dataclass(frozen=True)
@@ -67,7 +70,8 @@ def run_rollouts(spec: PolicySpec, models: list[mujoco.MjModel], reference: Refe
     the first rollout also keeps its body poses for the recording."""
     count, dt = len(start_frames), 1.0 / spec.get("rates.control_hz")
     model = models[0]
-    physics = ParallelPhysics(models, protocol.threads)
+    physics = MujocoCpuBackend(models, protocol.threads)
+    state = physics.state
     controller = DeployController(spec, model, reference, count)
     body_id = lambda names: np.array([model.body(n).id for n in names])
     ref_body = lambda names: np.array([reference.body_names.index(n) for n in names])
@@ -91,26 +95,25 @@ def run_rollouts(spec: PolicySpec, models: list[mujoco.MjModel], reference: Refe
         joint = model.joint(name)
         qpos0[:, model.jnt_qposadr[joint.id]] = reference.joint_pos[f, j]
         qvel0[:, model.jnt_dofadr[joint.id]] = reference.joint_vel[f, j]
-    for k in range(count):
-        physics.set_state(k, qpos0[k], qvel0[k])
-    controller.reset(physics.qpos(), physics.qvel(), start_frames)
+    physics.set_state(torch.arange(count), torch.from_numpy(qpos0), torch.from_numpy(qvel0))
+    controller.reset(state.qpos.numpy(), state.qvel.numpy(), start_frames)
 
     last = reference.n_frames - 1
     alive = np.ones(count, dtype=bool)
     terminated = np.zeros(count, dtype=bool)
     steps = np.zeros(count, dtype=np.int64)
     errors: list[dict[str, np.ndarray]] = []
-    first = physics.datas[0]
-    poses = [(first.xpos.copy(), first.xquat.copy())]
-    previous_pos = np.stack([d.xpos[tracked] for d in physics.datas])
+    poses = [(state.body_pos[0].numpy().copy(), state.body_quat[0].numpy().copy())]
+    previous_pos = state.body_pos[:, tracked].numpy().copy()
     obs = controller.current()
     while alive.any():
         action = policy(obs.astype(np.float32))
         ctrl = controller.targets(action)
-        physics.step(ctrl, spec.decimation, alive)
-        qpos, qvel = physics.qpos(), physics.qvel()
-        xpos = np.stack([d.xpos.copy() for d in physics.datas])
-        xquat = np.stack([d.xquat.copy() for d in physics.datas])
+        physics.step(torch.from_numpy(ctrl), spec.decimation, active=torch.from_numpy(alive))
+        qpos = state.qpos.numpy().copy()
+        qvel = state.qvel.numpy().copy()
+        xpos = state.body_pos.numpy().copy()
+        xquat = state.body_quat.numpy().copy()
         frame = controller.frame
         ref_pos = reference.body_pos_w[frame][:, tracked_ref]
         pos = xpos[:, tracked]
@@ -126,11 +129,12 @@ def run_rollouts(spec: PolicySpec, models: list[mujoco.MjModel], reference: Refe
             "E_mpbve": 1000 * np.linalg.norm(velocity - reference.body_lin_vel_w[frame][:, tracked_ref], axis=-1).mean(-1),
         })
         poses.append((xpos[0], xquat[0]))
-        tilt = np.arccos(np.clip((projected_gravity(xquat[:, root]) *
-                                  projected_gravity(reference.body_quat_w[frame, root_ref])).sum(-1), -1.0, 1.0))
-        far = np.linalg.norm(xpos[:, term] - reference.body_pos_w[frame][:, term_ref], axis=-1).max(-1)
+        tilted = bad_orientation(torch.from_numpy(xquat[:, root]),
+                                 torch.from_numpy(reference.body_quat_w[frame, root_ref]), protocol.orientation_limit_rad)
+        far = motion_far(torch.from_numpy(xpos[:, term]), torch.from_numpy(reference.body_pos_w[frame][:, term_ref]),
+                         protocol.motion_far_m)
         touching = np.array([_bad_contact(m, d, floor, allowed) for m, d in zip(models, physics.datas)])
-        failed = (tilt > protocol.orientation_limit_rad) | (far > protocol.motion_far_m) | touching
+        failed = tilted.numpy() | far.numpy() | touching
         steps += alive
         terminated |= alive & failed
         alive &= ~failed & (frame < last)

@@ -13,7 +13,8 @@ from rsl_rl.models import MLPModel
 from tensordict import TensorDict
 
 from rd_pipeline.export.policy_spec import FORMAT_VERSION, PolicySpec
-from rd_pipeline.rl.observations import actor_terms, layout_json
+from rd_pipeline.rl.actions import joint_semantics
+from rd_pipeline.rl.observations import ObservationsCfg, actor_terms, layout_json
 from rd_pipeline.robots import Robot
 
 
@@ -39,11 +40,11 @@ def build_policy_spec(robot: Robot, env: dict, num_actions: int, reference_stage
     policy = [config.joint_names[i] for i in config.policy_indices]
     lower, upper = robot.joint_range[config.policy_indices].T
     actions = env["actions"]
-    mask = list(config.residual_indices)
-    outputs = [policy[i] for i in mask] if actions["mode"] == "selective" else policy
+    semantics = joint_semantics(config, actions["mode"])
+    outputs = [joint for joint, kind in zip(policy, semantics) if kind != "reference"]
     if len(outputs) != num_actions:
         raise ValueError(f"the checkpoint's actor has {num_actions} outputs, the action mode implies {len(outputs)}")
-    terms = actor_terms(len(policy), num_actions)
+    terms = actor_terms(len(policy), num_actions, ObservationsCfg(**env["observations"]))
     floats = lambda values: [float(v) for v in values]
     return PolicySpec({
         "format_version": FORMAT_VERSION, "robot": config.name, "mjcf": config.mjcf,
@@ -55,10 +56,12 @@ def build_policy_spec(robot: Robot, env: dict, num_actions: int, reference_stage
         },
         "action": {
             "mode": actions["mode"], "scale": float(actions["scale"]), "clip": float(actions["clip"]),
-            "residual_mask": mask, "outputs": outputs,
-            "formula": "policy targets = (default_pos if mode is 'none' else the reference at the next control "
-                       "step); targets[outputs] += scale * clip(action, -clip, clip); targets projected to "
-                       "[policy_lower, policy_upper]; actuated joints outside the policy hold default_pos",
+            "residual_mask": [i for i, kind in enumerate(semantics) if kind == "residual"], "outputs": outputs,
+            "semantics": list(semantics),
+            "formula": "per policy joint: base = the reference at the next control step where semantics is "
+                       "'residual' or 'reference', default_pos where it is 'absolute'; targets[outputs] += "
+                       "scale * clip(action, -clip, clip); targets projected to [policy_lower, policy_upper]; "
+                       "actuated joints outside the policy hold default_pos",
         },
         "observation": layout_json(terms, int(env["history"])),
         "rates": {"control_hz": 1.0 / (env["physics_dt"] * env["decimation"]), "physics_hz": 1.0 / env["physics_dt"]},

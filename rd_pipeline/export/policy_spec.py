@@ -14,7 +14,7 @@ from typing import Any
 
 from rd_pipeline.errors import PipelineError
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 POLICY_FILE = "policy.pt"
 SPEC_FILE = "policy.json"
 
@@ -26,7 +26,7 @@ SCHEMA: dict[str, Any] = {
     "joints.kp": [_NUMBER], "joints.kd": [_NUMBER], "joints.effort_limit": [_NUMBER], "joints.default_pos": [_NUMBER],
     "joints.policy_lower": [_NUMBER], "joints.policy_upper": [_NUMBER],
     "action.mode": str, "action.scale": _NUMBER, "action.clip": _NUMBER, "action.residual_mask": [int],
-    "action.outputs": [str],
+    "action.outputs": [str], "action.semantics": [str],
     "observation.history": int, "observation.frame_size": int, "observation.size": int, "observation.order": str,
     "observation.terms": [dict],
     "rates.control_hz": _NUMBER, "rates.physics_hz": _NUMBER,
@@ -34,6 +34,8 @@ SCHEMA: dict[str, Any] = {
 }
 _PER_ACTUATED = ("joints.kp", "joints.kd", "joints.effort_limit", "joints.default_pos")
 _PER_POLICY = ("joints.policy_lower", "joints.policy_upper")
+SEMANTICS = ("residual", "absolute", "reference")
+"""Per policy joint, how its target is formed (see `rd_pipeline.rl.actions`)."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +81,17 @@ def _check(data: Any, source: Path) -> None:
         expected = len(joints["actuated"] if dotted in _PER_ACTUATED else joints["policy"])
         if len(joints[dotted.split(".")[1]]) != expected:
             raise PipelineError(f"{source}: field '{dotted}' has {len(joints[dotted.split('.')[1]])} values, expected {expected}")
+    action = data["action"]
+    if len(action["semantics"]) != len(joints["policy"]):
+        raise PipelineError(f"{source}: field 'action.semantics' has {len(action['semantics'])} values, "
+                            f"expected {len(joints['policy'])}")
+    for kind in action["semantics"]:
+        if kind not in SEMANTICS:
+            raise PipelineError(f"{source}: field 'action.semantics' has '{kind}' (allowed: {', '.join(SEMANTICS)})")
+    driven = [joint for joint, kind in zip(joints["policy"], action["semantics"]) if kind != "reference"]
+    if action["outputs"] != driven:
+        raise PipelineError(f"{source}: field 'action.outputs' must list the policy joints whose semantics "
+                            "is not 'reference', in policy order")
     terms = data["observation"]["terms"]
     for i, term in enumerate(terms):
         for name, kind in (("name", str), ("size", int), ("scale", _NUMBER)):

@@ -1,52 +1,100 @@
-"""Residual actions: q_tar = q_ref(t+1) + m * (scale * a), clipped and projected to the joint limits."""
+"""Residual actions (paper, "Residual Action Learning" and appendix "Action dimension").
+
+The policy outputs one value per policy joint (23 / 19 / 21 for G1 / H1 / H1-2). A residual mask
+says which joints read their output as a residual on the reference, `q_ref(t+1) + scale * a`;
+every other policy joint reads it as an absolute target around the default pose,
+`q_default + scale * a`. The presets are the masks of the paper's Table r5, plus
+`reference_locked`: only the selective joints have outputs and the rest follow the reference
+exactly (an earlier reading of the paper, kept as an arm so the difference can be measured).
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from fnmatch import fnmatch
+from typing import Literal, get_args
 
+import numpy as np
 import torch
 
-ACTION_MODES = ("selective", "all", "none")
+from rd_pipeline.robots.config import RobotConfig
+
+ResidualPreset = Literal[
+    "absolute", "selective", "hip_knee_ankle", "all_legs", "legs_torso", "all", "reference_locked",
+]
+RESIDUAL_PRESETS: tuple[str, ...] = get_args(ResidualPreset)
+
+JointSemantics = Literal["residual", "absolute", "reference"]
+"""How a policy joint's target is formed: residual on the reference, absolute around the default
+pose, or the reference itself (no output)."""
+
+_LEGS = ("*_hip_*", "*_knee_joint", "*_ankle*")
+_PRESET_PATTERNS: dict[str, tuple[str, ...]] = {
+    "absolute": (),
+    "hip_knee_ankle": ("*_hip_pitch_joint", "*_knee_joint", "*_ankle*"),
+    "all_legs": _LEGS,
+    "legs_torso": (*_LEGS, "torso_joint", "waist_*"),
+    "all": ("*",),
+}
+"""Joint-name patterns of each preset whose mask is not the robot's own (`selective` and
+`reference_locked` use the config's `residual_indices`)."""
 
 
 @dataclass(frozen=True)
 class ActionConfig:
     """Paper, Table "Control, Initialization, and Termination Parameters"."""
 
-    mode: str = "selective"
-    """`selective` (the robot's residual mask), `all` (every policy joint), `none` (absolute targets
-    around the default pose, the ablation baseline)."""
+    mode: ResidualPreset = "selective"
+    """Residual mask preset: `selective` (the robot's hip and knee pitch, the paper's method),
+    `absolute` (no residual joint, the ablation baseline), `hip_knee_ankle`, `all_legs`,
+    `legs_torso`, `all` (Table r5), or `reference_locked`."""
     scale: float = 0.25
     """Action scale."""
     clip: float = 100.0
     """Actions are clipped to +-clip before scaling."""
 
 
+def residual_mask(config: RobotConfig, preset: str) -> np.ndarray:
+    """(P,) bool over the policy joints: which read their output as a residual."""
+    if preset in ("selective", "reference_locked"):
+        mask = np.zeros(len(config.policy_joints), dtype=bool)
+        mask[list(config.residual_indices)] = True
+        return mask
+    patterns = _PRESET_PATTERNS[preset]
+    return np.array([any(fnmatch(joint, p) for p in patterns) for joint in config.policy_joints])
+
+
+def joint_semantics(config: RobotConfig, preset: str) -> tuple[str, ...]:
+    """Per policy joint, `residual`, `absolute` or `reference` under `preset`."""
+    mask = residual_mask(config, preset)
+    other = "reference" if preset == "reference_locked" else "absolute"
+    return tuple("residual" if m else other for m in mask)
+
+
 class ResidualActions:
-    """Turns policy outputs (N, A) into joint position targets for the P policy joints.
+    """Turns policy outputs (N, A) into joint position targets for the P policy joints."""
 
-    The policy outputs one value per joint it may move (`active`): the masked joints in `selective`
-    mode, every policy joint otherwise. Outputs for joints the mask zeroes would only add noise to
-    the PPO update (their KL, entropy and action-rate terms carry no signal), so they do not exist.
-    """
-
-    def __init__(self, config: ActionConfig, residual_mask: torch.Tensor, default_pos: torch.Tensor,
+    def __init__(self, config: ActionConfig, semantics: tuple[str, ...], default_pos: torch.Tensor,
                  lower: torch.Tensor, upper: torch.Tensor) -> None:
-        if config.mode not in ACTION_MODES:
-            raise ValueError(f"action mode must be one of {', '.join(ACTION_MODES)}, got '{config.mode}'")
         self.config = config
-        self.active = torch.nonzero(residual_mask).flatten() if config.mode == "selective" else torch.arange(len(default_pos))
-        self.default_pos, self.lower, self.upper = default_pos, lower, upper
+        self.semantics = semantics
+        self.outputs = torch.tensor([i for i, s in enumerate(semantics) if s != "reference"], dtype=torch.long)
+        on_reference = torch.tensor([s != "absolute" for s in semantics])
+        self.on_reference = on_reference.to(default_pos.device)
+        self.default_pos = default_pos
+        self.lower = lower
+        self.upper = upper
 
     @property
     def size(self) -> int:
         """A, the policy's action dimension."""
-        return len(self.active)
+        return len(self.outputs)
 
     def targets(self, actions: torch.Tensor, reference_next: torch.Tensor) -> torch.Tensor:
-        """(N, P) joint targets inside [lower, upper]; joints outside `active` follow the reference exactly."""
-        scaled = self.config.scale * actions.clamp(-self.config.clip, self.config.clip)
-        base = self.default_pos.expand_as(reference_next) if self.config.mode == "none" else reference_next
-        target = base.clone()
-        target[:, self.active] += scaled.to(target.dtype)
+        """(N, P) joint targets inside [lower, upper]."""
+        clip = self.config.clip
+        scaled = self.config.scale * actions.clamp(-clip, clip)
+        default = self.default_pos.expand_as(reference_next)
+        target = torch.where(self.on_reference, reference_next, default)
+        target[:, self.outputs] += scaled.to(target.dtype)
         return torch.maximum(torch.minimum(target, self.upper), self.lower)

@@ -1,8 +1,9 @@
 """Physics backends behind one seam: the environment logic (torch) never touches MuJoCo directly.
 
-`MujocoCpuBackend` keeps one `MjData` per environment and steps chunks of environments in worker
-threads (MuJoCo releases the GIL inside `mj_step`), so every core is busy. A GPU backend (MuJoCo
-Warp) implements the same protocol.
+Backends take and return torch tensors on their device. `MujocoCpuBackend` keeps one `MjData` per
+environment and steps chunks of environments in worker threads (MuJoCo releases the GIL inside
+`mj_step`), so every core is busy; its state tensors are zero-copy views of the numpy buffers the
+threads fill. The MuJoCo Warp backend implements the same protocol on Warp's arrays.
 """
 
 from __future__ import annotations
@@ -13,13 +14,14 @@ from typing import Protocol
 
 import mujoco
 import numpy as np
+import torch
 
 from rd_pipeline.errors import PipelineError
 
 
 @dataclass
 class PhysicsState:
-    """What the environment reads after a control step (numpy, per environment)."""
+    """What the environment reads after a control step (torch, per environment, on the backend's device)."""
 
     qpos: np.ndarray
     """(N, nq)"""
@@ -43,12 +45,13 @@ class PhysicsBackend(Protocol):
     num_envs: int
     models: list[mujoco.MjModel]
     state: PhysicsState
+    device: torch.device
 
-    def set_state(self, env_ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None: ...
+    def set_state(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None: ...
 
-    def step(self, ctrl: np.ndarray, substeps: int, joint_force: np.ndarray | None = None) -> PhysicsState: ...
+    def step(self, ctrl: torch.Tensor, substeps: int, joint_force: torch.Tensor | None = None) -> PhysicsState: ...
 
-    def push(self, env_ids: np.ndarray, planar_velocity: np.ndarray) -> None: ...
+    def push(self, env_ids: torch.Tensor, planar_velocity: torch.Tensor) -> None: ...
 
     def get_states(self) -> np.ndarray: ...
 
@@ -61,8 +64,16 @@ def body_velocities(xpos: np.ndarray, cvel: np.ndarray, root_com: np.ndarray) ->
     """(..., nbody, 6) world [angular, linear] velocity at each body origin from MuJoCo's `cvel`
     (spatial velocity at the tree's centre of mass `root_com` = subtree_com[body_rootid]); what
     `mj_objectVelocity` does, for all bodies at once."""
-    angular, linear = cvel[..., :3], cvel[..., 3:]
+    angular = cvel[..., :3]
+    linear = cvel[..., 3:]
     return np.concatenate([angular, linear - np.cross(xpos - root_com, angular)], axis=-1)
+
+
+def body_velocities_torch(xpos: torch.Tensor, cvel: torch.Tensor, root_com: torch.Tensor) -> torch.Tensor:
+    """`body_velocities` on torch tensors (batched backends keep them on their device)."""
+    angular = cvel[..., :3]
+    linear = cvel[..., 3:]
+    return torch.cat([angular, linear - torch.cross(xpos - root_com, angular, dim=-1)], dim=-1)
 
 
 class MujocoCpuBackend:
@@ -72,35 +83,50 @@ class MujocoCpuBackend:
         self.models = models
         self.datas = [mujoco.MjData(m) for m in models]
         self.num_envs = len(models)
+        self.device = torch.device("cpu")
         self.threads = max(1, threads)
         self.pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         bounds = np.linspace(0, self.num_envs, self.threads + 1).astype(int)
         self.chunks = [range(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
         model = models[0]
-        self.state = PhysicsState(
-            qpos=np.zeros((self.num_envs, model.nq)), qvel=np.zeros((self.num_envs, model.nv)),
-            body_pos=np.zeros((self.num_envs, model.nbody, 3)), body_quat=np.zeros((self.num_envs, model.nbody, 4)),
-            body_vel=np.zeros((self.num_envs, model.nbody, 6)), actuator_force=np.zeros((self.num_envs, model.nu)),
-            contact_force=np.zeros((self.num_envs, model.nbody, 3)),
-        )
+        n = self.num_envs
+        self.buffers = {
+            "qpos": np.zeros((n, model.nq)), "qvel": np.zeros((n, model.nv)),
+            "body_pos": np.zeros((n, model.nbody, 3)), "body_quat": np.zeros((n, model.nbody, 4)),
+            "body_vel": np.zeros((n, model.nbody, 6)), "actuator_force": np.zeros((n, model.nu)),
+            "contact_force": np.zeros((n, model.nbody, 3)),
+        }
+        self.state = PhysicsState(**{name: torch.from_numpy(array) for name, array in self.buffers.items()})
 
-    def set_state(self, env_ids: np.ndarray, qpos: np.ndarray, qvel: np.ndarray) -> None:
-        for k, i in enumerate(env_ids):
+    def set_state(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
+        qpos = qpos.numpy()
+        qvel = qvel.numpy()
+        for k, i in enumerate(env_ids.tolist()):
             data = self.datas[i]
             mujoco.mj_resetData(self.models[i], data)
-            data.qpos[:], data.qvel[:] = qpos[k], qvel[k]
+            data.qpos[:] = qpos[k]
+            data.qvel[:] = qvel[k]
             mujoco.mj_forward(self.models[i], data)
             self._read(i)
 
-    def step(self, ctrl: np.ndarray, substeps: int, joint_force: np.ndarray | None = None) -> PhysicsState:
+    def step(self, ctrl: torch.Tensor, substeps: int, joint_force: torch.Tensor | None = None,
+             active: torch.Tensor | None = None) -> PhysicsState:
         """Hold `ctrl` (N, nu) PD targets for `substeps` physics steps, with extra generalized forces
-        `joint_force` (N, nv) (random force injection) held over the same steps."""
+        `joint_force` (N, nv) (random force injection) held over the same steps; environments where
+        `active` (N,) is False are left as they are (finished rollouts)."""
+        ctrl = ctrl.numpy().astype(np.float64)
+        force = None if joint_force is None else joint_force.numpy()
+        stepped = None if active is None else active.numpy()
+
         def run(chunk: range) -> None:
             for i in chunk:
-                model, data = self.models[i], self.datas[i]
+                if stepped is not None and not stepped[i]:
+                    continue
+                model = self.models[i]
+                data = self.datas[i]
                 data.ctrl[:] = ctrl[i]
-                if joint_force is not None:
-                    data.qfrc_applied[:] = joint_force[i]
+                if force is not None:
+                    data.qfrc_applied[:] = force[i]
                 mujoco.mj_step(model, data, nstep=substeps)
                 self._read(i)
 
@@ -111,23 +137,28 @@ class MujocoCpuBackend:
         return self.state
 
     def _read(self, i: int) -> None:
-        model, data, s = self.models[i], self.datas[i], self.state
+        model = self.models[i]
+        data = self.datas[i]
+        b = self.buffers
         # mj_step leaves kinematics one substep behind the integrated state; refresh positions and velocities.
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
         mujoco.mj_comVel(model, data)
-        s.qpos[i], s.qvel[i] = data.qpos, data.qvel
-        s.body_pos[i], s.body_quat[i] = data.xpos, data.xquat
-        s.actuator_force[i] = data.actuator_force
-        s.body_vel[i] = body_velocities(data.xpos, data.cvel, data.subtree_com[model.body_rootid])
+        b["qpos"][i] = data.qpos
+        b["qvel"][i] = data.qvel
+        b["body_pos"][i] = data.xpos
+        b["body_quat"][i] = data.xquat
+        b["actuator_force"][i] = data.actuator_force
+        b["body_vel"][i] = body_velocities(data.xpos, data.cvel, data.subtree_com[model.body_rootid])
         # External (contact) force on each body, world frame, from one C call instead of a loop over contacts.
         mujoco.mj_rnePostConstraint(model, data)
-        s.contact_force[i] = data.cfrc_ext[:, 3:]
+        b["contact_force"][i] = data.cfrc_ext[:, 3:]
 
-    def push(self, env_ids: np.ndarray, planar_velocity: np.ndarray) -> None:
+    def push(self, env_ids: torch.Tensor, planar_velocity: torch.Tensor) -> None:
         """Add (k, 2) horizontal velocity to the floating base of `env_ids` (a push)."""
-        for k, i in enumerate(env_ids):
-            self.datas[i].qvel[:2] += planar_velocity[k]
+        velocity = planar_velocity.numpy()
+        for k, i in enumerate(env_ids.tolist()):
+            self.datas[i].qvel[:2] += velocity[k]
 
     def get_states(self) -> np.ndarray:
         """(N, S) full physics state of every environment (for checkpoints)."""
@@ -153,12 +184,15 @@ class MujocoCpuBackend:
 BACKENDS = ("cpu", "warp")
 
 
-def make_backend(name: str, models: list[mujoco.MjModel], threads: int) -> PhysicsBackend:
-    """`cpu`: C MuJoCo in `threads` threads; `warp`: MuJoCo Warp (GPU when present, else Warp's CPU device)."""
+def make_backend(name: str, models: list[mujoco.MjModel], threads: int, device: str) -> PhysicsBackend:
+    """`cpu`: C MuJoCo in `threads` threads (device `cpu` only); `warp`: MuJoCo Warp on `device`
+    (`cuda`, `cuda:N`, or `cpu` for Warp's CPU device)."""
     if name == "cpu":
+        if device != "cpu":
+            raise PipelineError(f"train.env.device '{device}' needs the warp backend (train.env.backend=warp)")
         return MujocoCpuBackend(models, threads)
     if name == "warp":
         from rd_pipeline.rl.warp_backend import MujocoWarpBackend
 
-        return MujocoWarpBackend(models)
+        return MujocoWarpBackend(models, device)
     raise PipelineError(f"train.env.backend must be one of {', '.join(BACKENDS)}, got '{name}'")

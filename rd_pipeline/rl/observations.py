@@ -7,7 +7,12 @@ training code.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
+
+import torch
+
+from rd_pipeline.rl.quat import projected_gravity
 
 
 @dataclass(frozen=True)
@@ -22,28 +27,84 @@ class ObservationTerm:
     """Multiplier applied to the raw quantity."""
 
 
-JOINT_VEL_SCALE = 0.05
-ANG_VEL_SCALE = 0.25
+@dataclass(frozen=True)
+class ObservationsCfg:
+    """Scales of the actor's observation terms (the raw quantity is multiplied by its scale)."""
+
+    joint_pos: float = 1.0
+    """Policy-joint positions minus the default pose (rad)."""
+    joint_vel: float = 0.05
+    """Policy-joint velocities (rad/s)."""
+    projected_gravity: float = 1.0
+    """The unit gravity vector in the pelvis frame."""
+    base_ang_vel: float = 0.25
+    """Pelvis angular velocity in the pelvis frame (rad/s)."""
+    last_action: float = 1.0
+    """The previous policy output (before clipping and scaling)."""
+    ref_joint_pos_next: float = 1.0
+    """The reference's policy-joint positions at the next control step (rad)."""
 
 
-def actor_terms(num_joints: int, num_actions: int) -> tuple[ObservationTerm, ...]:
-    """One actor frame, oldest history frame first in the stacked vector:
+@dataclass(frozen=True)
+class ActorInputs:
+    """Raw quantities the actor terms read (batched, policy-joint order)."""
 
-    - `joint_pos`: policy-joint positions minus the default pose (rad);
-    - `joint_vel`: policy-joint velocities (rad/s);
-    - `projected_gravity`: the unit gravity vector in the pelvis frame;
-    - `base_ang_vel`: pelvis angular velocity in the pelvis frame (rad/s);
-    - `last_action`: the previous policy output (before clipping and scaling);
-    - `ref_joint_pos_next`: the reference's policy-joint positions at the next control step (rad).
-    """
-    return (
-        ObservationTerm("joint_pos", num_joints, 1.0),
-        ObservationTerm("joint_vel", num_joints, JOINT_VEL_SCALE),
-        ObservationTerm("projected_gravity", 3, 1.0),
-        ObservationTerm("base_ang_vel", 3, ANG_VEL_SCALE),
-        ObservationTerm("last_action", num_actions, 1.0),
-        ObservationTerm("ref_joint_pos_next", num_joints, 1.0),
-    )
+    joint_pos: torch.Tensor
+    """(N, P) joint positions."""
+    joint_vel: torch.Tensor
+    """(N, P) joint velocities."""
+    root_quat: torch.Tensor
+    """(N, 4) pelvis orientation, wxyz."""
+    base_ang_vel: torch.Tensor
+    """(N, 3) pelvis angular velocity, pelvis frame."""
+    last_action: torch.Tensor
+    """(N, A) previous action."""
+    ref_joint_pos_next: torch.Tensor
+    """(N, P) reference joint positions at the next control step."""
+    default_pos: torch.Tensor
+    """(P,) default pose."""
+
+
+def joint_pos(x: ActorInputs) -> torch.Tensor:
+    return x.joint_pos - x.default_pos
+
+
+def joint_vel(x: ActorInputs) -> torch.Tensor:
+    return x.joint_vel
+
+
+def gravity(x: ActorInputs) -> torch.Tensor:
+    return projected_gravity(x.root_quat)
+
+
+def base_ang_vel(x: ActorInputs) -> torch.Tensor:
+    return x.base_ang_vel
+
+
+def last_action(x: ActorInputs) -> torch.Tensor:
+    return x.last_action
+
+
+def ref_joint_pos_next(x: ActorInputs) -> torch.Tensor:
+    return x.ref_joint_pos_next
+
+
+ACTOR_TERMS: dict[str, Callable[[ActorInputs], torch.Tensor]] = {
+    "joint_pos": joint_pos, "joint_vel": joint_vel, "projected_gravity": gravity,
+    "base_ang_vel": base_ang_vel, "last_action": last_action, "ref_joint_pos_next": ref_joint_pos_next,
+}
+"""Term name -> function, in the order of an actor frame."""
+
+
+def actor_terms(num_joints: int, num_actions: int, cfg: ObservationsCfg) -> tuple[ObservationTerm, ...]:
+    """One actor frame's layout (oldest history frame first in the stacked vector)."""
+    sizes = {"projected_gravity": 3, "base_ang_vel": 3, "last_action": num_actions}
+    return tuple(ObservationTerm(name, sizes.get(name, num_joints), getattr(cfg, name)) for name in ACTOR_TERMS)
+
+
+def actor_frame(terms: tuple[ObservationTerm, ...], inputs: ActorInputs) -> torch.Tensor:
+    """(N, frame_size): every term's scaled value, concatenated in layout order."""
+    return torch.cat([term.scale * ACTOR_TERMS[term.name](inputs) for term in terms], dim=-1)
 
 
 def layout_json(terms: tuple[ObservationTerm, ...], history: int) -> dict:

@@ -49,22 +49,35 @@ class PpoConfig:
 class MultiHeadRolloutStorage(RolloutStorage):
     """Rollout storage whose rewards, values and returns have one column per critic head."""
 
-    def __init__(self, num_envs: int, steps: int, obs: TensorDict, actions: int, heads: int) -> None:
-        super().__init__("rl", num_envs, steps, obs, (actions,))
-        self.rewards = torch.zeros(steps, num_envs, heads)
-        self.values = torch.zeros(steps, num_envs, heads)
-        self.returns = torch.zeros(steps, num_envs, heads)
+    def __init__(self, num_envs: int, steps: int, obs: TensorDict, actions: int, heads: int, device: str) -> None:
+        super().__init__("rl", num_envs, steps, obs, (actions,), device)
+        self.rewards = torch.zeros(steps, num_envs, heads, device=device)
+        self.values = torch.zeros(steps, num_envs, heads, device=device)
+        self.returns = torch.zeros(steps, num_envs, heads, device=device)
 
     def add_transition(self, transition: RolloutStorage.Transition) -> None:
         rewards = transition.rewards
-        transition.rewards = torch.zeros(self.num_envs)  # the parent copies a scalar column; ours follows
+        transition.rewards = torch.zeros(self.num_envs, device=self.device)  # the parent copies a scalar column
         step = self.step
         super().add_transition(transition)
         self.rewards[step].copy_(rewards)
 
 
+UPSTREAM_SOURCES: dict[str, str] = {
+    "PPO.process_env_step": "0454dc3eb3ac68291fa35f644d50d9f4977b3c676c2479eeea3358232a0e8ee0",
+    "PPO.compute_returns": "c2781a53c4e9c570df595b1585ad1ba90937337e39f6a3f70d8e0be1041e322d",
+    "RolloutStorage.add_transition": "0d363337aa552de9f213ec18dca1878094800df4c4c49b58da53c8a7e6e4a468",
+}
+"""sha256 of the rsl-rl-lib 5.5.1 methods that `MultiHeadPPO` and `MultiHeadRolloutStorage` copy or
+rely on (a test compares them with the installed library)."""
+
+
 class MultiHeadPPO(PPO):
-    """rsl-rl PPO whose critic outputs one value per reward group."""
+    """rsl-rl PPO whose critic outputs one value per reward group.
+
+    `process_env_step` is rsl-rl's with the time-out bootstrap per head (and no RND);
+    `compute_returns` replaces its single-head GAE.
+    """
 
     def process_env_step(self, obs: TensorDict, rewards: torch.Tensor, dones: torch.Tensor, extras: dict) -> None:
         self.transition.rewards = rewards.clone()
@@ -84,15 +97,16 @@ class MultiHeadPPO(PPO):
         st.advantages = combined_advantage(advantages).unsqueeze(-1)
 
 
-def build_ppo(obs: TensorDict, num_envs: int, num_actions: int, heads: int, config: PpoConfig) -> MultiHeadPPO:
+def build_ppo(obs: TensorDict, num_envs: int, num_actions: int, heads: int, config: PpoConfig,
+              device: str = "cpu") -> MultiHeadPPO:
     groups = {"actor": ["policy"], "critic": ["critic"]}
     actor = MLPModel(obs, groups, "actor", num_actions, list(config.hidden_dims), "relu", obs_normalization=True,
                      distribution_cfg={"class_name": "GaussianDistribution", "init_std": config.init_noise_std})
     critic = MLPModel(obs, groups, "critic", heads, list(config.hidden_dims), "relu", obs_normalization=True)
-    storage = MultiHeadRolloutStorage(num_envs, config.steps_per_env, obs, num_actions, heads)
+    storage = MultiHeadRolloutStorage(num_envs, config.steps_per_env, obs, num_actions, heads, device)
     return MultiHeadPPO(
         actor, critic, storage, num_learning_epochs=config.learning_epochs, num_mini_batches=config.mini_batches,
         clip_param=config.clip, gamma=config.gamma, lam=config.lam, value_loss_coef=config.value_loss_coef,
         entropy_coef=config.entropy_coef, learning_rate=config.learning_rate, max_grad_norm=config.max_grad_norm,
-        desired_kl=config.desired_kl,
+        desired_kl=config.desired_kl, device=device,
     )

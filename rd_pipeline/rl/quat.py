@@ -14,6 +14,6 @@ def rotate_inverse(quat: torch.Tensor, vec: torch.Tensor) -> torch.Tensor:
 
 def projected_gravity(quat: torch.Tensor) -> torch.Tensor:
     """World gravity direction (0, 0, -1) in the body frame."""
-    down = torch.zeros(*quat.shape[:-1], 3, dtype=quat.dtype)
+    down = torch.zeros(*quat.shape[:-1], 3, dtype=quat.dtype, device=quat.device)
     down[..., 2] = -1.0
     return rotate_inverse(quat, down)

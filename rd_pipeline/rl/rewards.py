@@ -1,4 +1,5 @@
-"""Reward terms of the paper's reward table, as pure torch functions of a batched tracking state.
+"""Reward terms of the paper's reward table: pure torch functions of a batched tracking state, each
+configured by a frozen dataclass (weight, sigma, thresholds) that is a field of `RewardsCfg`.
 
 Tracking terms are Gaussian kernels w * exp(-e / sigma^2) of a mean squared error e; regularization
 terms are penalties w * P (w < 0) scaled by the penalty curriculum. Every term belongs to a group,
@@ -7,208 +8,140 @@ and each group is one value head of the critic.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
 
-
-@dataclass
-class TrackingState:
-    """One control step of N environments, robot and reference side by side (world frame)."""
-
-    body_pos: torch.Tensor
-    """(N, B, 3) tracked body positions."""
-    body_quat: torch.Tensor
-    """(N, B, 4) tracked body orientations, wxyz."""
-    body_lin_vel: torch.Tensor
-    """(N, B, 3)."""
-    body_ang_vel: torch.Tensor
-    """(N, B, 3)."""
-    joint_pos: torch.Tensor
-    """(N, P) policy joint positions."""
-    joint_vel: torch.Tensor
-    """(N, P)."""
-    ref_body_pos: torch.Tensor
-    """(N, B, 3) reference body positions."""
-    ref_body_quat: torch.Tensor
-    """(N, B, 4)."""
-    ref_body_lin_vel: torch.Tensor
-    """(N, B, 3)."""
-    ref_body_ang_vel: torch.Tensor
-    """(N, B, 3)."""
-    ref_joint_pos: torch.Tensor
-    """(N, P)."""
-    ref_joint_vel: torch.Tensor
-    """(N, P)."""
-    feet_contact: torch.Tensor
-    """(N, 2) bool, from contact forces."""
-    ref_feet_contact: torch.Tensor
-    """(N, 2) bool, from the reference."""
-    feet_force: torch.Tensor
-    """(N, 2, 3) contact force on each foot."""
-    feet_speed: torch.Tensor
-    """(N, 2) horizontal foot speed."""
-    torque: torch.Tensor
-    """(N, J) applied joint torques (all actuated joints)."""
-    joint_acc: torch.Tensor
-    """(N, P) joint accelerations."""
-    action: torch.Tensor
-    """(N, P) current action."""
-    last_action: torch.Tensor
-    """(N, P)."""
-    second_last_action: torch.Tensor
-    """(N, P)."""
-    feet_air_time: torch.Tensor
-    """(N, 2) seconds a foot was in the air, on the step it touches down (0 on every other step)."""
-    undesired_contacts: torch.Tensor
-    """(N,) count of bodies other than the feet touching the ground."""
-    terminated: torch.Tensor
-    """(N,) bool, ended by a failure (not by the end of the motion)."""
-
-
-@dataclass(frozen=True)
-class RewardIndices:
-    """Which tracked bodies play which role."""
-
-    root: int
-    """Index of the root (pelvis) among the tracked bodies."""
-    feet: tuple[int, int]
-    """Indices of the feet."""
-    keypoints: tuple[int, ...]
-    """The "VR keypoints" (torso and hands)."""
-
-
-@dataclass(frozen=True)
-class RewardLimits:
-    """Soft limits (the appendix's 0.90 / 0.90 / 0.85 of the platform limits, applied by the caller)."""
-
-    joint_lower: torch.Tensor
-    """(P,)"""
-    joint_upper: torch.Tensor
-    """(P,)"""
-    joint_velocity: torch.Tensor
-    """(P,)"""
-    torque: torch.Tensor
-    """(J,)"""
-    max_foot_force: float = 400.0
-    """N, above which foot contact force is penalized."""
-
-
-@dataclass(frozen=True)
-class RewardTerm:
-    """One line of the reward table."""
-
-    name: str
-    """Term name (logged per term)."""
-    group: str
-    """Value head it feeds."""
-    weight: float
-    """Scale; negative for penalties."""
-    sigma: float | None
-    """Gaussian width for tracking terms; None for penalties."""
-    error: Callable[[TrackingState, RewardIndices, RewardLimits], torch.Tensor]
-    """(N,) mean squared error (tracking) or penalty magnitude (regularization)."""
-
-
-def _sq(x: torch.Tensor) -> torch.Tensor:
-    return (x * x).sum(dim=-1)
-
-
-def quat_angle(q1: torch.Tensor, q2: torch.Tensor) -> torch.Tensor:
-    """Rotation angle between unit quaternions (..., 4), in [0, pi]."""
-    dot = (q1 * q2).sum(dim=-1).abs().clamp(max=1.0)
-    return 2.0 * torch.acos(dot)
-
-
-def _relative(pos: torch.Tensor, root: int) -> torch.Tensor:
-    return pos - pos[:, root : root + 1]
-
-
-def _feet(x: torch.Tensor, i: RewardIndices) -> torch.Tensor:
-    return x[:, list(i.feet)]
-
-
-def _keys(x: torch.Tensor, i: RewardIndices) -> torch.Tensor:
-    return x[:, list(i.keypoints)]
-
-
-def _excess(value: torch.Tensor, limit: torch.Tensor) -> torch.Tensor:
-    return (value.abs() - limit).clamp(min=0.0).sum(dim=-1)
-
-
-TERMS: tuple[RewardTerm, ...] = (
-    RewardTerm("body_pos", "body", 2.0, 0.02, lambda s, i, lim: _sq(s.body_pos - s.ref_body_pos).mean(-1)),
-    RewardTerm("body_pos_rel", "body", 0.5, 0.02,
-               lambda s, i, lim: _sq(_relative(s.body_pos, i.root) - _relative(s.ref_body_pos, i.root)).mean(-1)),
-    RewardTerm("keypoint_pos", "body", 1.8, 0.02, lambda s, i, lim: _sq(_keys(s.body_pos - s.ref_body_pos, i)).mean(-1)),
-    RewardTerm("keypoint_pos_rel", "body", 0.5, 0.02,
-               lambda s, i, lim: _sq(_keys(_relative(s.body_pos, i.root) - _relative(s.ref_body_pos, i.root), i)).mean(-1)),
-    RewardTerm("feet_pos", "body", 2.0, 0.015, lambda s, i, lim: _sq(_feet(s.body_pos - s.ref_body_pos, i)).mean(-1)),
-    RewardTerm("feet_pos_rel", "body", 0.5, 0.015,
-               lambda s, i, lim: _sq(_feet(_relative(s.body_pos, i.root) - _relative(s.ref_body_pos, i.root), i)).mean(-1)),
-    RewardTerm("body_orientation", "body", 0.5, 0.10, lambda s, i, lim: quat_angle(s.body_quat, s.ref_body_quat).square().mean(-1)),
-    RewardTerm("body_lin_vel", "body", 0.5, 1.0, lambda s, i, lim: _sq(s.body_lin_vel - s.ref_body_lin_vel).mean(-1)),
-    RewardTerm("body_ang_vel", "body", 0.5, 15.0, lambda s, i, lim: _sq(s.body_ang_vel - s.ref_body_ang_vel).mean(-1)),
-    RewardTerm("root_pos", "root", 2.0, 0.25, lambda s, i, lim: _sq(s.body_pos[:, i.root] - s.ref_body_pos[:, i.root])),
-    RewardTerm("root_orientation", "root", 0.25, 0.25,
-               lambda s, i, lim: quat_angle(s.body_quat[:, i.root], s.ref_body_quat[:, i.root]).square()),
-    RewardTerm("joint_pos", "joint", 1.0, 0.30, lambda s, i, lim: _sq(s.joint_pos - s.ref_joint_pos)),
-    RewardTerm("joint_vel", "joint", 0.5, 30.0, lambda s, i, lim: _sq(s.joint_vel - s.ref_joint_vel)),
-    # Contact mask: the kernel of the fraction of feet whose contact state disagrees with the reference.
-    RewardTerm("contact_mask", "contact", 0.5, 1.0,
-               lambda s, i, lim: (s.feet_contact != s.ref_feet_contact).float().mean(-1)),
-    # Feet air time (legged-gym form): at touchdown, the air time beyond 0.25 s, for feet the reference
-    # also has on the ground, so real steps pay and shuffling or hopping off-reference does not.
-    RewardTerm("feet_air_time", "contact", 1.0, None,
-               lambda s, i, lim: ((s.feet_air_time - 0.25) * ((s.feet_air_time > 0) & s.ref_feet_contact)).sum(-1)),
-    RewardTerm("torque", "regularization", -1e-6, None, lambda s, i, lim: _sq(s.torque)),
-    RewardTerm("dof_vel", "regularization", -1e-4, None, lambda s, i, lim: _sq(s.joint_vel)),
-    RewardTerm("dof_acc", "regularization", -2.5e-8, None, lambda s, i, lim: _sq(s.joint_acc)),
-    RewardTerm("action_rate", "regularization", -0.1, None, lambda s, i, lim: _sq(s.action - s.last_action)),
-    RewardTerm("action_smoothness", "regularization", -0.001, None,
-               lambda s, i, lim: _sq(s.action - 2 * s.last_action + s.second_last_action)),
-    RewardTerm("foot_contact_force", "regularization", -0.01, None,
-               lambda s, i, lim: (s.feet_force.norm(dim=-1) - lim.max_foot_force).clamp(min=0.0).sum(-1)),
-    RewardTerm("stumble", "regularization", -2.0, None,
-               lambda s, i, lim: (s.feet_force[..., :2].norm(dim=-1) > 5 * s.feet_force[..., 2].abs()).any(-1).float()),
-    RewardTerm("slippage", "regularization", -1.0, None, lambda s, i, lim: (s.feet_speed.square() * s.feet_contact).sum(-1)),
-    RewardTerm("dof_pos_limits", "regularization", -10.0, None,
-               lambda s, i, lim: ((lim.joint_lower - s.joint_pos).clamp(min=0) + (s.joint_pos - lim.joint_upper).clamp(min=0)).sum(-1)),
-    RewardTerm("dof_vel_limits", "regularization", -1.0, None, lambda s, i, lim: _excess(s.joint_vel, lim.joint_velocity)),
-    RewardTerm("torque_limits", "regularization", -0.5, None, lambda s, i, lim: _excess(s.torque, lim.torque)),
-    RewardTerm("termination", "regularization", -200.0, None, lambda s, i, lim: s.terminated.float()),
-    RewardTerm("collision", "regularization", -30.0, None, lambda s, i, lim: s.undesired_contacts.float()),
+from rd_pipeline.rl import reward_terms as terms
+from rd_pipeline.rl.reward_terms import (
+    AirTimeTerm, FootForceTerm, PenaltyTerm, SoftLimitTerm, StumbleTerm, TermContext, TrackingState, TrackingTerm,
 )
-"""The paper's reward table."""
-
-GROUPS: tuple[str, ...] = tuple(dict.fromkeys(term.group for term in TERMS))
 
 
-def compute_rewards(
-    state: TrackingState, indices: RewardIndices, limits: RewardLimits, penalty_scale: float,
-    sigma: dict[str, float] | None = None, terms: tuple[RewardTerm, ...] = TERMS,
-) -> tuple[torch.Tensor, dict[str, torch.Tensor], dict[str, torch.Tensor]]:
-    """(N, G) reward per group (the critic's heads, in `GROUPS` order), (N,) value per term and
-    (N,) error per term.
+@dataclass(frozen=True)
+class RewardsCfg:
+    """The paper's reward table: one field per term, named after its function. Tracking terms
+    are Gaussian kernels; regularization terms are scaled by the penalty curriculum."""
 
-    `sigma` replaces a tracking term's table sigma (the adaptive-sigma curriculum); regularization
-    penalties are multiplied by `penalty_scale` (the penalty curriculum).
-    """
-    per_group = {group: torch.zeros(state.joint_pos.shape[0], dtype=state.joint_pos.dtype) for group in GROUPS}
-    values, errors = {}, {}
-    for term in terms:
-        error = term.error(state, indices, limits)
-        if term.sigma is not None:
-            width = (sigma or {}).get(term.name, term.sigma)
-            value = term.weight * torch.exp(-error / width**2)
-        elif term.group == "regularization":
-            value = term.weight * penalty_scale * error
-        else:
-            value = term.weight * error
-        values[term.name], errors[term.name] = value, error
-        per_group[term.group] = per_group[term.group] + value
-    return torch.stack([per_group[g] for g in GROUPS], dim=-1), values, errors
+    body_pos: TrackingTerm = TrackingTerm(2.0, 0.02)
+    """Tracked body positions (world)."""
+    body_pos_rel: TrackingTerm = TrackingTerm(0.5, 0.02)
+    """Tracked body positions relative to the root."""
+    keypoint_pos: TrackingTerm = TrackingTerm(1.8, 0.02)
+    """VR keypoints (torso, hands), world."""
+    keypoint_pos_rel: TrackingTerm = TrackingTerm(0.5, 0.02)
+    """VR keypoints relative to the root."""
+    feet_pos: TrackingTerm = TrackingTerm(2.0, 0.015)
+    """Feet, world."""
+    feet_pos_rel: TrackingTerm = TrackingTerm(0.5, 0.015)
+    """Feet relative to the root."""
+    body_orientation: TrackingTerm = TrackingTerm(0.5, 0.10)
+    """Tracked body orientations."""
+    body_lin_vel: TrackingTerm = TrackingTerm(0.5, 1.0)
+    """Tracked body linear velocities."""
+    body_ang_vel: TrackingTerm = TrackingTerm(0.5, 15.0)
+    """Tracked body angular velocities."""
+    root_pos: TrackingTerm = TrackingTerm(2.0, 0.25)
+    """Root position."""
+    root_orientation: TrackingTerm = TrackingTerm(0.25, 0.25)
+    """Root orientation."""
+    joint_pos: TrackingTerm = TrackingTerm(1.0, 0.30)
+    """Policy joint positions."""
+    joint_vel: TrackingTerm = TrackingTerm(0.5, 30.0)
+    """Policy joint velocities."""
+    contact_mask: TrackingTerm = TrackingTerm(0.5, 1.0)
+    """Feet contact states against the reference's."""
+    feet_air_time: AirTimeTerm = AirTimeTerm(1.0)
+    """Air time of real steps."""
+    torque: PenaltyTerm = PenaltyTerm(-1e-6)
+    """Squared joint torques."""
+    dof_vel: PenaltyTerm = PenaltyTerm(-1e-4)
+    """Squared joint velocities."""
+    dof_acc: PenaltyTerm = PenaltyTerm(-2.5e-8)
+    """Squared joint accelerations."""
+    action_rate: PenaltyTerm = PenaltyTerm(-0.1)
+    """Squared action change."""
+    action_smoothness: PenaltyTerm = PenaltyTerm(-0.001)
+    """Squared second difference of the actions."""
+    foot_contact_force: FootForceTerm = FootForceTerm(-0.01)
+    """Foot force above the allowance."""
+    stumble: StumbleTerm = StumbleTerm(-2.0)
+    """Sideways foot force."""
+    slippage: PenaltyTerm = PenaltyTerm(-1.0)
+    """Squared speed of feet in contact."""
+    dof_pos_limits: SoftLimitTerm = SoftLimitTerm(-10.0, soft_fraction=0.9)
+    """Joint positions beyond the soft range."""
+    dof_vel_limits: SoftLimitTerm = SoftLimitTerm(-1.0, soft_fraction=0.9)
+    """Joint velocities beyond the soft limit."""
+    torque_limits: SoftLimitTerm = SoftLimitTerm(-0.5, soft_fraction=0.85)
+    """Torques beyond the soft limit."""
+    termination: PenaltyTerm = PenaltyTerm(-200.0)
+    """Ending in a failure."""
+    collision: PenaltyTerm = PenaltyTerm(-30.0)
+    """Bodies other than the feet touching anything."""
+
+
+REWARD_TERMS: dict[str, tuple[Callable[..., torch.Tensor], str]] = {
+    "body_pos": (terms.body_pos, "body"), "body_pos_rel": (terms.body_pos_rel, "body"),
+    "keypoint_pos": (terms.keypoint_pos, "body"), "keypoint_pos_rel": (terms.keypoint_pos_rel, "body"),
+    "feet_pos": (terms.feet_pos, "body"), "feet_pos_rel": (terms.feet_pos_rel, "body"),
+    "body_orientation": (terms.body_orientation, "body"), "body_lin_vel": (terms.body_lin_vel, "body"),
+    "body_ang_vel": (terms.body_ang_vel, "body"),
+    "root_pos": (terms.root_pos, "root"), "root_orientation": (terms.root_orientation, "root"),
+    "joint_pos": (terms.joint_pos, "joint"), "joint_vel": (terms.joint_vel, "joint"),
+    "contact_mask": (terms.contact_mask, "contact"), "feet_air_time": (terms.feet_air_time, "contact"),
+    "torque": (terms.torque, "regularization"), "dof_vel": (terms.dof_vel, "regularization"),
+    "dof_acc": (terms.dof_acc, "regularization"), "action_rate": (terms.action_rate, "regularization"),
+    "action_smoothness": (terms.action_smoothness, "regularization"),
+    "foot_contact_force": (terms.foot_contact_force, "regularization"), "stumble": (terms.stumble, "regularization"),
+    "slippage": (terms.slippage, "regularization"), "dof_pos_limits": (terms.dof_pos_limits, "regularization"),
+    "dof_vel_limits": (terms.dof_vel_limits, "regularization"), "torque_limits": (terms.torque_limits, "regularization"),
+    "termination": (terms.termination, "regularization"), "collision": (terms.collision, "regularization"),
+}
+"""Term name -> (function, the critic value head it feeds)."""
+
+GROUPS: tuple[str, ...] = tuple(dict.fromkeys(group for _, group in REWARD_TERMS.values()))
+
+
+class RewardManager:
+    """Evaluates the configured terms and sums them per group (one column per critic head)."""
+
+    def __init__(self, cfg: RewardsCfg, context: TermContext) -> None:
+        self.context = context
+        self.terms = [(f.name, getattr(cfg, f.name)) for f in dataclasses.fields(cfg)]
+
+    def tracking_sigmas(self) -> dict[str, float]:
+        """Table sigma of each tracking term (the adaptive-sigma origins)."""
+        return {name: term.sigma for name, term in self.terms if isinstance(term, TrackingTerm)}
+
+    def compute(
+        self, state: TrackingState, penalty_scale: float, sigma: dict[str, float] | None = None,
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor], dict[str, torch.Tensor]]:
+        """(N, G) reward per group (in `GROUPS` order), (N,) value and (N,) error per term.
+
+        `sigma` replaces a tracking term's table sigma (the adaptive-sigma curriculum); regularization
+        penalties are multiplied by `penalty_scale` (the penalty curriculum).
+        """
+        like = state.joint_pos
+        per_group = {group: torch.zeros(like.shape[0], dtype=like.dtype, device=like.device) for group in GROUPS}
+        values = {}
+        errors = {}
+        for name, term in self.terms:
+            function, group = REWARD_TERMS[name]
+            error = function(state, self.context, term)
+            if isinstance(term, TrackingTerm):
+                width = (sigma or {}).get(name, term.sigma)
+                value = term.weight * torch.exp(-error / width**2)
+            elif group == "regularization":
+                value = term.weight * penalty_scale * error
+            else:
+                value = term.weight * error
+            values[name] = value
+            errors[name] = error
+            per_group[group] = per_group[group] + value
+        return torch.stack([per_group[g] for g in GROUPS], dim=-1), values, errors
 
 
 class AdaptiveSigma:
@@ -219,9 +152,9 @@ class AdaptiveSigma:
     tracking improves instead of saturating at a reward that no longer separates good from better.
     """
 
-    def __init__(self, alpha: float, terms: tuple[RewardTerm, ...] = TERMS) -> None:
+    def __init__(self, alpha: float, table_sigmas: dict[str, float]) -> None:
         self.alpha = alpha
-        self.origin = {t.name: t.sigma**2 for t in terms if t.sigma is not None}
+        self.origin = {name: sigma**2 for name, sigma in table_sigmas.items()}
         self.variance = dict(self.origin)
 
     def update(self, errors: dict[str, torch.Tensor]) -> None:

@@ -31,7 +31,7 @@ def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, env: Tracking
 
 
 def load_checkpoint(path: Path, ppo: MultiHeadPPO, env: TrackingEnv) -> int:
-    state = torch.load(path, weights_only=False)
+    state = torch.load(path, weights_only=False, map_location="cpu")
     ppo.load(state["algorithm"], None, strict=True)
     ppo.learning_rate = state["learning_rate"]
     for group in ppo.optimizer.param_groups:
@@ -74,8 +74,8 @@ def train(
             "reward": round(float(per_group.sum()), 4),
             **{f"reward_{g}": round(float(v), 4) for g, v in zip(GROUPS, per_group)},
             **{f"loss_{k}": round(float(v), 4) for k, v in losses.items()},
-            "learning_rate": ppo.learning_rate, "motion_far_m": round(env.motion_far, 4),
-            "penalty_scale": round(env.penalty_scale, 4),
+            "learning_rate": ppo.learning_rate, "motion_far_m": round(env.curriculum.motion_far_m, 4),
+            "penalty_scale": round(env.curriculum.penalty_scale, 4),
         }
         history.append(row)
         log.write(json.dumps(row) + "\n")

@@ -10,17 +10,19 @@ uncapped segments in proportion to their weight, until no segment exceeds the ca
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal, get_args
 
 import torch
 
-MODES = ("uniform", "distribution", "failure", "combined")
+SamplerMode = Literal["uniform", "distribution", "failure", "combined"]
+MODES: tuple[str, ...] = get_args(SamplerMode)
 
 
 @dataclass(frozen=True)
 class SamplerConfig:
     """The appendix values by default."""
 
-    mode: str = "combined"
+    mode: SamplerMode = "combined"
     """`uniform`, `distribution` (uniform floor + balanced prior), `failure` (floor + failure prior) or `combined`."""
     uniform_weight: float = 0.3
     """lambda_u, the uniform exploration floor."""

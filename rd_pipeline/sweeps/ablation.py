@@ -10,10 +10,11 @@ import json
 from pathlib import Path
 
 from rd_pipeline.evaluation.metrics import ERROR_METRICS, t_interval
+from rd_pipeline.rl.actions import RESIDUAL_PRESETS
 from rd_pipeline.sweeps.runner import TrialResult
 
 STUDIES: dict[str, dict[str, tuple[str, ...]]] = {
-    "residual": {mode: (f"train.env.actions.mode={mode}",) for mode in ("none", "all", "selective")},
+    "residual": {mode: (f"train.env.actions.mode={mode}",) for mode in RESIDUAL_PRESETS},
     "sampler": {mode: (f"train.sampler.mode={mode}",) for mode in ("uniform", "distribution", "failure", "combined")},
 }
 """Study -> arm -> `--set` overrides."""
@@ -33,10 +34,10 @@ def _value(report: dict, metric: str) -> float | None:
     return policy["fixed_grid"][metric]
 
 
-def ablation_table(study: str, results: list[TrialResult]) -> dict:
+def ablation_table(study: str, arms: tuple[str, ...], results: list[TrialResult]) -> dict:
     """{arm: {metric: {mean, ci95, n}}} over seeds, from the trials' `report.json`."""
     table: dict[str, dict] = {}
-    for arm in STUDIES[study]:
+    for arm in arms:
         per_seed: dict[int, list[dict]] = {}
         for r in results:
             if r.trial.variant == arm and r.report:

@@ -1,0 +1,104 @@
+"""Event terms: reference state initialization at reset and domain randomization (per-environment
+models at startup, pushes and random force injection while stepping).
+
+Random numbers come from one numpy generator on the host, in a fixed order, so a seed gives the
+same run on any device; the draws are copied to the training device.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+
+from rd_pipeline.rl.env_config import EnvConfig, Randomization
+from rd_pipeline.rl.quat import rotate_inverse
+from rd_pipeline.rl.sim_model import randomized_copy
+
+DR_PARAMS = ("mass", "friction", "kp", "kd", "com_x", "com_y", "com_z", "delay", "rfi_factor")
+"""Per-environment randomization draws, in the order the critic observes them."""
+
+
+def randomized_models(base: mujoco.MjModel, count: int, r: Randomization, root_body: int,
+                      rng: np.random.Generator) -> tuple[list[mujoco.MjModel], np.ndarray]:
+    """`count` models with link mass, friction, PD gains and pelvis COM drawn per environment, and
+    the (count, len(DR_PARAMS)) draws."""
+    params = np.zeros((count, len(DR_PARAMS)))
+    models = []
+    for i in range(count):
+        if not r.enabled:
+            params[i] = [1, 1, 1, 1, 0, 0, 0, 0, 1]
+            models.append(copy.copy(base))
+            continue
+        mass = rng.uniform(*r.mass_factor)
+        friction = rng.uniform(*r.friction_factor)
+        kp = rng.uniform(*r.pd_factor)
+        kd = rng.uniform(*r.pd_factor)
+        com = rng.uniform(-r.com_offset_m, r.com_offset_m, size=3)
+        delay = rng.integers(0, r.max_delay_steps + 1)
+        rfi = rng.uniform(*r.torque_rfi_factor)
+        params[i] = [mass, friction, kp, kd, *com, delay, rfi]
+        models.append(randomized_copy(base, mass, friction, kp, kd, root_body, com))
+    return models, params
+
+
+def push_intervals(r: Randomization, count: int, step_dt: float, rng: np.random.Generator) -> np.ndarray:
+    """Control steps until each of `count` environments is pushed next."""
+    lo, hi = r.push_interval_s
+    return np.round(rng.uniform(lo, hi, size=count) / step_dt).astype(np.int64)
+
+
+def push_velocities(r: Randomization, count: int, rng: np.random.Generator) -> np.ndarray:
+    """(count, 2) horizontal velocity changes."""
+    return rng.uniform(-r.push_max_speed, r.push_max_speed, (count, 2))
+
+
+def random_joint_forces(r: Randomization, rfi_factor: np.ndarray, effort_limit: np.ndarray,
+                        rng: np.random.Generator) -> np.ndarray:
+    """(N, J) random force injection: `torque_rfi` x factor x effort limit, redrawn every control step."""
+    scale = r.torque_rfi * rfi_factor[:, None] * effort_limit
+    return scale * rng.uniform(-1.0, 1.0, scale.shape)
+
+
+@dataclass(frozen=True)
+class ReferenceFrames:
+    """The reference quantities reset draws from, (T, ...) tensors on the training device."""
+
+    root_pos: torch.Tensor
+    root_quat: torch.Tensor
+    root_lin_vel: torch.Tensor
+    root_ang_vel: torch.Tensor
+    joint_pos: torch.Tensor
+    joint_vel: torch.Tensor
+
+
+def rsi_state(c: EnvConfig, ref: ReferenceFrames, frames: torch.Tensor, nq: int, nv: int, qpos_idx: torch.Tensor,
+              dof_idx: torch.Tensor, joint_range: torch.Tensor, rng: np.random.Generator
+              ) -> tuple[torch.Tensor, torch.Tensor]:
+    """(k, nq), (k, nv) float64 states at reference `frames` with the appendix noise (reference
+    state initialization), joint positions clipped to their range."""
+    k = len(frames)
+    device = frames.device
+    host = lambda a: torch.from_numpy(np.asarray(a, dtype=np.float64)).to(device)
+    qpos = torch.zeros(k, nq, dtype=torch.float64, device=device)
+    qvel = torch.zeros(k, nv, dtype=torch.float64, device=device)
+    joints = len(qpos_idx)
+    qpos[:, :3] = ref.root_pos[frames].double() + host(rng.normal(0, c.rsi_root_pos_m, (k, 3)) * [1, 1, 0])
+    quat = _perturb_quat(ref.root_quat[frames].cpu().numpy(), np.radians(c.rsi_root_rot_deg), rng)
+    qpos[:, 3:7] = host(quat)
+    qpos[:, qpos_idx] = ref.joint_pos[frames].double() + host(rng.uniform(-c.rsi_joint_pos, c.rsi_joint_pos, (k, joints)))
+    qvel[:, :3] = ref.root_lin_vel[frames].double() + host(rng.normal(0, c.rsi_root_vel, (k, 3)))
+    qvel[:, 3:6] = rotate_inverse(qpos[:, 3:7].float(), ref.root_ang_vel[frames]).double()
+    qvel[:, dof_idx] = ref.joint_vel[frames].double() + host(rng.uniform(-c.rsi_joint_vel, c.rsi_joint_vel, (k, joints)))
+    qpos[:, qpos_idx] = torch.clamp(qpos[:, qpos_idx], joint_range[:, 0], joint_range[:, 1])
+    return qpos, qvel
+
+
+def _perturb_quat(quat_wxyz: np.ndarray, max_angle: float, rng: np.random.Generator) -> np.ndarray:
+    noise = Rotation.from_rotvec(rng.normal(size=(len(quat_wxyz), 3)) * max_angle / np.sqrt(3))
+    base = Rotation.from_quat(quat_wxyz[:, [1, 2, 3, 0]])
+    return (noise * base).as_quat()[:, [3, 0, 1, 2]]
