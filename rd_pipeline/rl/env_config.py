@@ -10,6 +10,7 @@ from rd_pipeline.rl.actions import ActionConfig
 from rd_pipeline.rl.curricula import CurriculaCfg
 from rd_pipeline.rl.observations import ObservationsCfg
 from rd_pipeline.rl.rewards import RewardsCfg
+from rd_pipeline.rl.sim_model import CollisionModel
 from rd_pipeline.rl.terminations import TerminationsCfg
 
 
@@ -55,6 +56,10 @@ class EnvConfig:
     with the warp backend (physics and learning then share GPU memory)."""
     threads: int = 2
     """Worker threads stepping MuJoCo (cpu backend)."""
+    collision: CollisionModel = "primitive"
+    """Collision geometry of the training model: `primitive` (fitted capsules and boxes, self-collision
+    only in the robot config's pairs) or `mesh` (the MJCF's meshes, every pair); validation always
+    uses the meshes."""
     physics_dt: float = 0.002
     """500 Hz physics."""
     decimation: int = 10

@@ -11,17 +11,79 @@ from __future__ import annotations
 import copy
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Literal
 
 import mujoco
 import numpy as np
 
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.assets import asset_path
+from rd_pipeline.robots.primitives import fit_collision_meshes
+
+
+CollisionModel = Literal["primitive", "mesh"]
 
 
 def pd_simulation_model(mjcf: Path, joint_names: Sequence[str], kp: np.ndarray, kd: np.ndarray,
                         effort_limit: np.ndarray, timestep: float) -> mujoco.MjModel:
     """A compiled model whose actuator driving `joint_names[i]` is a PD with `kp[i]`, `kd[i]`, `effort_limit[i]`."""
+    return _pd_spec(mjcf, joint_names, kp, kd, effort_limit, timestep).compile()
+
+
+def simulation_model(robot: Robot, timestep: float = 0.002, collision: CollisionModel = "mesh") -> mujoco.MjModel:
+    """The robot with the config's gains and effort limits: `mesh` collides the MJCF's geometry
+    (every pair of geoms), `primitive` the fitted training shapes (see `primitive_collision`)."""
+    config = robot.config
+    spec = _pd_spec(asset_path(config.mjcf), config.joint_names, config.kp, config.kd, config.effort_limit, timestep)
+    if collision == "primitive":
+        primitive_collision(spec, config.foot_bodies, config.collision_pairs)
+    return spec.compile()
+
+
+def primitive_collision(spec: mujoco.MjSpec, foot_bodies: Sequence[str],
+                        collision_pairs: Sequence[tuple[str, str]]) -> None:
+    """Turn `spec` into a training model: every collision mesh becomes its fitted primitives (see
+    `rd_pipeline.robots.primitives`); robot geoms touch the floor, and each other only in the robot
+    config's collision pairs (frictionless, condim 1), as mjlab trains its humanoids."""
+    for i, geom in enumerate(spec.geoms):
+        geom.name = geom.name or f"rd_geom_{i}"
+    model = spec.compile()
+    feet = tuple(model.body(name).id for name in foot_bodies)
+    by_name = {geom.name: geom for geom in spec.geoms}
+    pieces: dict[int, int] = {}
+    for shape in fit_collision_meshes(model, feet):
+        mesh_geom = by_name[model.geom(shape.geom).name]
+        count = pieces.get(shape.geom, 0)
+        pieces[shape.geom] = count + 1
+        if count == 0:
+            geom = mesh_geom
+        else:  # a further slab of the same mesh: a new geom with the mesh geom's contact settings
+            body = spec.body(model.body(int(model.geom_bodyid[shape.geom])).name)
+            geom = body.add_geom(name=f"{mesh_geom.name}_{count}", friction=mesh_geom.friction,
+                                 condim=mesh_geom.condim, solref=mesh_geom.solref, solimp=mesh_geom.solimp,
+                                 margin=mesh_geom.margin, gap=mesh_geom.gap, priority=mesh_geom.priority)
+        geom.type = mujoco.mjtGeom.mjGEOM_CAPSULE if shape.kind == "capsule" else mujoco.mjtGeom.mjGEOM_BOX
+        geom.meshname = ""
+        geom.pos = shape.pos
+        geom.quat = shape.quat
+        geom.size = shape.size
+    # Robot geoms collide with the floor, and with each other only in the config's pairs: every
+    # other body pair is excluded, so the broadphase drops it before any narrowphase test.
+    # condim 1 makes self-contacts frictionless; floor contacts take the floor's condim 3.
+    model = spec.compile()
+    for geom in spec.geoms:
+        if int(model.geom(geom.name).bodyid[0]) != 0:
+            geom.condim = 1
+    wanted = {frozenset(pair) for pair in collision_pairs}
+    bodies = [model.body(i).name for i in range(1, model.nbody)]
+    for i, first in enumerate(bodies):
+        for second in bodies[i + 1 :]:
+            if frozenset((first, second)) not in wanted:
+                spec.add_exclude(bodyname1=first, bodyname2=second)
+
+
+def _pd_spec(mjcf: Path, joint_names: Sequence[str], kp: np.ndarray, kd: np.ndarray, effort_limit: np.ndarray,
+             timestep: float) -> mujoco.MjSpec:
     spec = mujoco.MjSpec.from_file(str(mjcf))
     spec.discard_visual()
     spec.option.timestep = timestep
@@ -37,14 +99,7 @@ def pd_simulation_model(mjcf: Path, joint_names: Sequence[str], kp: np.ndarray, 
         actuator.ctrllimited = False
         actuator.forcelimited = True
         actuator.forcerange = [-float(effort_limit[i]), float(effort_limit[i])]
-    return spec.compile()
-
-
-def simulation_model(robot: Robot, timestep: float = 0.002) -> mujoco.MjModel:
-    """The training model: the robot config's gains and effort limits."""
-    config = robot.config
-    return pd_simulation_model(asset_path(config.mjcf), config.joint_names, config.kp, config.kd,
-                               config.effort_limit, timestep)
+    return spec
 
 
 RANDOMIZED_FIELDS = ("body_mass", "geom_friction", "body_ipos", "actuator_gainprm", "actuator_biasprm")
