@@ -1,20 +1,27 @@
-"""Benchmark: environment steps/s with a fixed (zero) policy against raw `mj_step` on the same cores,
-and full PPO samples/s including the update.
+"""Benchmark: training throughput of the old path (mesh collision, one `mj_step` call per environment
+from Python threads) against the new default (fitted primitives, batched `mujoco.rollout`), in one
+run, interleaved.
 
-    python bench/env_throughput.py [--robot g1] [--envs 64] [--threads 2] [--backend cpu|warp]
+    python bench/env_throughput.py [--robot g1] [--envs 128] [--threads 2] [--repeats 5]
         [--out bench/results/env_throughput.json]
 
-Raw throughput runs `mj_step` on the environment's own simulation models (one per environment,
-domain-randomized), started from copies of the environments' states after each timed block, in the
-same number of threads; the ratio compares physics steps per second (env steps x decimation)
-measured side by side, interleaved, in one run. With `--backend warp` the raw figure is
-`mujoco_warp.step` on the environment's own batched model and data (all worlds at once).
+For each path: env physics steps/s with a zero policy (env steps x decimation); raw batched
+stepping of the same models from the same states (for the new path, the env's own
+`Rollout.rollout` calls replayed with their states and controls; for the old one, threads of
+`mj_step` from copies of the env states: nothing but physics); PPO samples/s including the update
+(the `cpu` profile's PPO settings; torch on one thread while collecting and on every core for the
+update, as the trainer does); and CPU memory per environment (resident-set growth of building the
+path's environments, divided by their number). Medians over `--repeats` blocks; the paths
+alternate block by block so both see the same machine. The last line reads
+`speedup=<new PPO samples/s / old> physics_ratio=<new env physics / new raw batched stepping>`.
+With `--paths warp` the MuJoCo Warp backend is measured alone (`--device cuda` on a GPU).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import resource
 import statistics
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -31,42 +38,149 @@ from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.ppo import PpoConfig, build_ppo
 from rd_pipeline.rl.rewards import GROUPS
+from rd_pipeline.rl.rollout_backend import CONTROL
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
 from rd_pipeline.sampling.segments import segment_bounds
 
+PATHS = {
+    "old": {"backend": "cpu", "collision": "mesh"},
+    "new": {"backend": "rollout", "collision": "primitive"},
+    "warp": {"backend": "warp", "collision": "primitive"},
+}
 
-def raw_physics_steps_per_s(models: list[mujoco.MjModel], source: list[mujoco.MjData], threads: int,
-                            steps: int) -> float:
-    """Plain `mj_step` over the environment's own (domain-randomized) models, from copies of the
-    environments' current states and controls (the same contacts to solve), in the same threads."""
-    envs = len(models)
-    spec = mujoco.mjtState.mjSTATE_INTEGRATION
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robot", default="g1")
+    parser.add_argument("--motion", default="dance1_subject2")
+    parser.add_argument("--envs", type=int, default=128)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--paths", nargs="+", default=["old", "new"], choices=list(PATHS))
+    parser.add_argument("--device", default="cpu", help="torch device for the warp path: cpu or cuda")
+    parser.add_argument("--out", type=Path, default=Path("bench/results/env_throughput.json"))
+    args = parser.parse_args()
+    robot = load_robot(args.robot)
+    reference = import_retargeted_csv(paths.csv_path(args.robot, args.motion), robot, 30.0, 50.0, "cubic",
+                                      ContactThresholds()).reference
+    starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
+    envs = {}
+    memory_mb = {}
+    for name in args.paths:
+        before = _rss_mb()
+        sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=0)
+        device = args.device if name == "warp" else "cpu"
+        config = EnvConfig(num_envs=args.envs, threads=args.threads, device=device, **PATHS[name])
+        envs[name] = TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=0)
+        memory_mb[name] = (_rss_mb() - before) / args.envs
+    rates = {name: {"env": [], "raw": [], "ppo": []} for name in envs}
+    ppos = {name: build_ppo(env.get_observations(), args.envs, env.num_actions, len(GROUPS), PpoConfig(),
+                            env.config.device) for name, env in envs.items()}
+    for _ in range(args.repeats):
+        for name, env in envs.items():
+            rate, calls = _env_rate(env)
+            rates[name]["env"].append(rate)
+            rates[name]["raw"].append(_raw_rate(env, args.threads, calls))
+            rates[name]["ppo"].append(_ppo_rate(env, ppos[name]))
+    result = {"robot": args.robot, "motion": args.motion, "envs": args.envs, "threads": args.threads,
+              "repeats": args.repeats, "paths": {}}
+    for name, measured in rates.items():
+        env = envs[name]
+        result["paths"][name] = {
+            **PATHS[name], "cpu_memory_mb_per_env": round(memory_mb[name], 2),
+            "env_physics_steps_per_s": round(statistics.median(measured["env"])),
+            "raw_batched_steps_per_s": round(statistics.median(measured["raw"])),
+            "ppo_samples_per_s_including_update": round(statistics.median(measured["ppo"]), 1),
+            "samples": {key: [round(v) for v in values] for key, values in measured.items()},
+        }
+        env.close()
+    line = ""
+    if "old" in rates and "new" in rates:
+        new = result["paths"]["new"]
+        speedup = new["ppo_samples_per_s_including_update"] / result["paths"]["old"]["ppo_samples_per_s_including_update"]
+        ratio = new["env_physics_steps_per_s"] / new["raw_batched_steps_per_s"]
+        result["speedup"] = round(speedup, 2)
+        result["physics_ratio"] = round(ratio, 3)
+        line = f"speedup={speedup:.2f} physics_ratio={ratio:.3f}"
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    print(json.dumps(result, indent=2))
+    if line:
+        print(line)
+
+
+def _env_rate(env: TrackingEnv, steps: int = 50) -> tuple[float, list]:
+    """Env physics steps/s with a zero policy, and (for the rollout backend) the physics calls it
+    made: states, controls and step counts, to replay without the environment."""
+    zero = torch.zeros(env.num_envs, env.num_actions, device=env.device)
+    calls: list = []
+    backend = env.backend
+    if env.config.backend == "rollout":
+        pool = backend.pool
+        original = pool.rollout
+
+        def recording(models, datas, states, controls, **kwargs):
+            calls.append((models, states.copy(), controls.copy(), kwargs["nstep"]))
+            return original(models, datas, states, controls, **kwargs)
+
+        pool.rollout = recording
+    cores = torch.get_num_threads()
+    torch.set_num_threads(1)  # as the trainer collects rollouts
+    began = time.perf_counter()
+    for _ in range(steps):
+        env.step(zero)
+    seconds = time.perf_counter() - began
+    torch.set_num_threads(cores)
+    if calls:
+        pool.rollout = original
+    return env.num_envs * steps * env.config.decimation / seconds, calls
+
+
+def _raw_rate(env: TrackingEnv, threads: int, calls: list, control_steps: int = 50) -> float:
+    """Physics alone on the env's own models: for the rollout backend, the env's own rollout calls
+    replayed (same models, states and controls); for the threaded backend, `mj_step` from copies of
+    the environments' current states, in the same threads."""
+    backend = env.backend
+    decimation = env.config.decimation
+    if env.config.backend == "rollout":
+        model = backend.models[0]
+        steps = 0
+        began = time.perf_counter()
+        for models, states, controls, nstep in calls:
+            trajectory = np.zeros((len(states), nstep, backend.nstate))
+            sensors = np.zeros((len(states), nstep, model.nsensordata))
+            backend.pool.rollout(models, backend.datas, states, controls, control_spec=CONTROL, nstep=nstep,
+                                 state=trajectory, sensordata=sensors, skip_checks=True)
+            steps += len(states) * nstep
+        return steps / (time.perf_counter() - began)
+    if env.config.backend == "warp":
+        return _raw_warp_rate(backend, control_steps * decimation)
     datas = []
-    for model, data in zip(models, source):
+    for model, data in zip(backend.models, backend.datas):
+        copy = mujoco.MjData(model)
+        spec = mujoco.mjtState.mjSTATE_INTEGRATION
         state = np.empty(mujoco.mj_stateSize(model, spec))
         mujoco.mj_getState(model, data, state, spec)
-        copy = mujoco.MjData(model)
         mujoco.mj_setState(model, copy, state, spec)
-        mujoco.mj_forward(model, copy)
         datas.append(copy)
-    chunks = np.array_split(np.arange(envs), threads)
+    chunks = np.array_split(np.arange(env.num_envs), threads)
 
     def run(chunk: np.ndarray) -> None:
-        for _ in range(steps // 10):
+        for _ in range(control_steps):
             for i in chunk:
-                mujoco.mj_step(models[i], datas[i], nstep=10)
+                mujoco.mj_step(backend.models[i], datas[i], nstep=decimation)
 
     began = time.perf_counter()
     with ThreadPoolExecutor(threads) as pool:
         list(pool.map(run, chunks))
-    return envs * steps / (time.perf_counter() - began)
+    return env.num_envs * control_steps * decimation / (time.perf_counter() - began)
 
 
-def raw_warp_steps_per_s(backend, steps: int) -> float:
-    """`mujoco_warp.step` on the backend's batched model and data, 10 steps per launch (a CUDA graph
-    on a GPU, as the environment does), without any read-back."""
-    wp, mjw = backend.wp, backend.mjw
+def _raw_warp_rate(backend, steps: int) -> float:
+    """`mujoco_warp.step` on the backend's batched model and data, 10 steps per launch."""
+    wp = backend.wp
+    mjw = backend.mjw
     with wp.ScopedDevice(backend.warp_device):
         if backend.warp_device.startswith("cuda"):
             with wp.ScopedCapture() as capture:
@@ -84,58 +198,27 @@ def raw_warp_steps_per_s(backend, steps: int) -> float:
     return backend.num_envs * steps / (time.perf_counter() - began)
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--robot", default="g1")
-    parser.add_argument("--motion", default="dance1_subject2")
-    parser.add_argument("--envs", type=int, default=64)
-    parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--backend", choices=("cpu", "warp"), default="cpu")
-    parser.add_argument("--device", default="cpu", help="torch device: cpu, or cuda with --backend warp")
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--out", type=Path, default=Path("bench/results/env_throughput.json"))
-    args = parser.parse_args()
-    torch.set_num_threads(1)
-    robot = load_robot(args.robot)
-    reference = import_retargeted_csv(paths.csv_path(args.robot, args.motion), robot, 30.0, 50.0, "cubic",
-                                      ContactThresholds()).reference
-    starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
-    sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=0)
-    config = EnvConfig(num_envs=args.envs, threads=args.threads, backend=args.backend, device=args.device)
-    env = TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=0)
-    zero = torch.zeros(args.envs, env.num_actions, device=env.device)
-    env_rates, raw_rates = [], []
-    for _ in range(args.repeats):  # interleaved, so both see the same machine state
-        began = time.perf_counter()
-        for _ in range(50):
-            env.step(zero)
-        env_rates.append(args.envs * 50 * config.decimation / (time.perf_counter() - began))
-        raw_rates.append(raw_warp_steps_per_s(env.backend, 500) if args.backend == "warp"
-                         else raw_physics_steps_per_s(env.backend.models, env.backend.datas, args.threads, 500))
-    ppo = build_ppo(env.get_observations(), args.envs, env.num_actions, len(GROUPS), PpoConfig(), args.device)
+def _ppo_rate(env: TrackingEnv, ppo, iterations: int = 2) -> float:
     obs = env.get_observations()
+    cores = torch.get_num_threads()
     began = time.perf_counter()
-    iterations = 3
     for _ in range(iterations):
+        torch.set_num_threads(1)
         with torch.inference_mode():
             for _ in range(ppo.storage.num_transitions_per_env):
                 actions = ppo.act(obs)
                 obs, reward, dones, extras = env.step(actions)
                 ppo.process_env_step(obs, reward, dones, extras)
             ppo.compute_returns(obs)
+        torch.set_num_threads(cores)
         ppo.update()
-    ppo_rate = iterations * ppo.storage.num_transitions_per_env * args.envs / (time.perf_counter() - began)
-    env_median, raw_median = statistics.median(env_rates), statistics.median(raw_rates)
-    result = {
-        "robot": args.robot, "envs": args.envs, "threads": args.threads, "backend": args.backend,
-        "env_steps_per_s": round(env_median / config.decimation, 1),
-        "env_physics_steps_per_s": round(env_median, 1), "raw_mj_step_per_s": round(raw_median, 1),
-        "ratio": round(env_median / raw_median, 3), "ratio_target": 0.7,
-        "ppo_samples_per_s_including_update": round(ppo_rate, 1),
-    }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
-    print(json.dumps(result, indent=2))
+    return iterations * ppo.storage.num_transitions_per_env * env.num_envs / (time.perf_counter() - began)
+
+
+def _rss_mb() -> float:
+    """Current resident set size (Linux)."""
+    pages = int(Path("/proc/self/statm").read_text().split()[1])
+    return pages * resource.getpagesize() / 2**20
 
 
 if __name__ == "__main__":

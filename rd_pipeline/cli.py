@@ -43,7 +43,7 @@ class Run:
     clip: str | None = None
     """Train on part of the motion, `START:END` in seconds (sets train.clip)."""
     backend: str | None = None
-    """Physics backend for training, `cpu` or `warp` (sets train.env.backend)."""
+    """Physics backend for training, `rollout`, `cpu` or `warp` (sets train.env.backend)."""
     set: tuple[str, ...] = ()
     """Parameter overrides, `stage.param=value`."""
     params_file: Path | None = None

@@ -181,15 +181,20 @@ class MujocoCpuBackend:
             self.pool.shutdown()
 
 
-BACKENDS = ("cpu", "warp")
+BACKENDS = ("rollout", "cpu", "warp")
 
 
 def make_backend(name: str, models: list[mujoco.MjModel], threads: int, device: str) -> PhysicsBackend:
-    """`cpu`: C MuJoCo in `threads` threads (device `cpu` only); `warp`: MuJoCo Warp on `device`
-    (`cuda`, `cuda:N`, or `cpu` for Warp's CPU device)."""
+    """`rollout`: C MuJoCo batched by `mujoco.rollout` on `threads` threads, GIL released (models
+    need `body_sensors`); `cpu`: one C MuJoCo step call per environment from `threads` Python
+    threads; `warp`: MuJoCo Warp on `device` (`cuda`, `cuda:N`, or `cpu` for Warp's CPU device)."""
+    if name in ("rollout", "cpu") and device != "cpu":
+        raise PipelineError(f"train.env.device '{device}' needs the warp backend (train.env.backend=warp)")
+    if name == "rollout":
+        from rd_pipeline.rl.rollout_backend import MujocoRolloutBackend
+
+        return MujocoRolloutBackend(models, threads)
     if name == "cpu":
-        if device != "cpu":
-            raise PipelineError(f"train.env.device '{device}' needs the warp backend (train.env.backend=warp)")
         return MujocoCpuBackend(models, threads)
     if name == "warp":
         from rd_pipeline.rl.warp_backend import MujocoWarpBackend

@@ -46,7 +46,8 @@ class TrackingEnv:
         self.step_dt = config.physics_dt * config.decimation
         rc = robot.config
 
-        base = simulation_model(robot, config.physics_dt, config.collision)
+        sensors = config.backend == "rollout"
+        base = simulation_model(robot, config.physics_dt, config.collision, body_sensors=sensors)
         models, dr_params = events.randomized_models(
             base, self.num_envs, config.randomization, base.body(rc.root_body).id, self.rng)
         self.backend = make_backend(config.backend, models, config.threads, config.device)

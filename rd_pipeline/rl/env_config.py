@@ -40,7 +40,7 @@ class Randomization:
     """Control delay drawn from 0..max_delay_steps control steps."""
 
 
-PhysicsBackendName = Literal["cpu", "warp"]
+PhysicsBackendName = Literal["rollout", "cpu", "warp"]
 
 
 @dataclass(frozen=True)
@@ -49,13 +49,14 @@ class EnvConfig:
 
     num_envs: int = 64
     """Parallel environments."""
-    backend: PhysicsBackendName = "cpu"
-    """Physics backend: `cpu` (C MuJoCo in threads) or `warp` (MuJoCo Warp, the `gpu` extra)."""
+    backend: PhysicsBackendName = "rollout"
+    """Physics backend: `rollout` (C MuJoCo batched by `mujoco.rollout`, GIL-free threads), `cpu`
+    (one C MuJoCo call per environment from Python threads) or `warp` (MuJoCo Warp, the `gpu` extra)."""
     device: str = "cpu"
     """Torch device of the simulation state and the training tensors: `cpu`, or `cuda` / `cuda:N`
     with the warp backend (physics and learning then share GPU memory)."""
     threads: int = 2
-    """Worker threads stepping MuJoCo (cpu backend)."""
+    """Threads stepping C MuJoCo (rollout and cpu backends): one per core."""
     collision: CollisionModel = "primitive"
     """Collision geometry of the training model: `primitive` (fitted capsules and boxes, self-collision
     only in the robot config's pairs) or `mesh` (the MJCF's meshes, every pair); validation always

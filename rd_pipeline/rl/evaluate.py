@@ -35,5 +35,6 @@ def survival(env: TrackingEnv, policy: Callable[[TensorDict], torch.Tensor], sta
 
 
 def zero_action(num_actions: int) -> Callable[[TensorDict], torch.Tensor]:
-    """The reference fed straight to PD."""
+    """Zero actions: the reference fed straight to PD on residual joints, the default pose on
+    absolute ones (so, with `all`, the reference itself)."""
     return lambda obs: torch.zeros(obs.batch_size[0], num_actions)

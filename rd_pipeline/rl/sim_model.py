@@ -30,14 +30,57 @@ def pd_simulation_model(mjcf: Path, joint_names: Sequence[str], kp: np.ndarray, 
     return _pd_spec(mjcf, joint_names, kp, kd, effort_limit, timestep).compile()
 
 
-def simulation_model(robot: Robot, timestep: float = 0.002, collision: CollisionModel = "mesh") -> mujoco.MjModel:
+def simulation_model(robot: Robot, timestep: float = 0.002, collision: CollisionModel = "mesh",
+                     body_sensors: bool = False) -> mujoco.MjModel:
     """The robot with the config's gains and effort limits: `mesh` collides the MJCF's geometry
-    (every pair of geoms), `primitive` the fitted training shapes (see `primitive_collision`)."""
+    (every pair of geoms), `primitive` the fitted training shapes (see `primitive_collision`).
+    `body_sensors` adds the sensors a batched rollout reads its results from (`add_body_sensors`)."""
     config = robot.config
     spec = _pd_spec(asset_path(config.mjcf), config.joint_names, config.kp, config.kd, config.effort_limit, timestep)
     if collision == "primitive":
         primitive_collision(spec, config.foot_bodies, config.collision_pairs)
+    if body_sensors:
+        add_body_sensors(spec)
     return spec.compile()
+
+
+BODY_SENSORS = ("pos", "quat", "linvel", "angvel", "contact_force")
+"""Per robot body, in this order: world position (3), orientation wxyz (4), world linear and
+angular velocity of the body origin (3 + 3), net contact force on the body, world frame (3)."""
+
+
+def add_body_sensors(spec: mujoco.MjSpec) -> None:
+    """Sensors for every body but the world (`BODY_SENSORS`), then each actuator's force."""
+    frame = (
+        mujoco.mjtSensor.mjSENS_FRAMEPOS, mujoco.mjtSensor.mjSENS_FRAMEQUAT,
+        mujoco.mjtSensor.mjSENS_FRAMELINVEL, mujoco.mjtSensor.mjSENS_FRAMEANGVEL,
+    )
+    # Contact sensor: data = force (bit 1), reduce = net force (3), one result, in the world frame.
+    net_force = [1 << int(mujoco.mjtConDataField.mjCONDATA_FORCE), 3, 1]
+    for body in spec.bodies[1:]:
+        for name, kind in zip(BODY_SENSORS, frame):
+            spec.add_sensor(name=f"rd_{name}_{body.name}", type=kind, objtype=mujoco.mjtObj.mjOBJ_XBODY,
+                            objname=body.name)
+        spec.add_sensor(name=f"rd_contact_force_{body.name}", type=mujoco.mjtSensor.mjSENS_CONTACT,
+                        objtype=mujoco.mjtObj.mjOBJ_BODY, objname=body.name, intprm=net_force)
+    for actuator in spec.actuators:
+        actuator.name = actuator.name or f"rd_{actuator.target}"
+        spec.add_sensor(name=f"rd_actuator_force_{actuator.name}", type=mujoco.mjtSensor.mjSENS_ACTUATORFRC,
+                        objtype=mujoco.mjtObj.mjOBJ_ACTUATOR, objname=actuator.name)
+
+
+def body_sensor_index(model: mujoco.MjModel, name: str) -> np.ndarray:
+    """(nbody - 1, dim) sensordata indices of body sensor `name` (one of `BODY_SENSORS`), body 1 on."""
+    rows = []
+    for body in range(1, model.nbody):
+        sensor = model.sensor(f"rd_{name}_{model.body(body).name}")
+        rows.append(sensor.adr[0] + np.arange(sensor.dim[0]))
+    return np.array(rows)
+
+
+def actuator_force_index(model: mujoco.MjModel) -> np.ndarray:
+    """(nu,) sensordata indices of the actuator forces."""
+    return np.array([model.sensor(f"rd_actuator_force_{model.actuator(i).name}").adr[0] for i in range(model.nu)])
 
 
 def primitive_collision(spec: mujoco.MjSpec, foot_bodies: Sequence[str],
@@ -67,6 +110,10 @@ def primitive_collision(spec: mujoco.MjSpec, foot_bodies: Sequence[str],
         geom.pos = shape.pos
         geom.quat = shape.quat
         geom.size = shape.size
+    # No geom uses a mesh any more; without them a model is kilobytes instead of ~60 MB (G1), and
+    # training keeps one model per environment.
+    for mesh in list(spec.meshes):
+        spec.delete(mesh)
     # Robot geoms collide with the floor, and with each other only in the config's pairs: every
     # other body pair is excluded, so the broadphase drops it before any narrowphase test.
     # condim 1 makes self-contacts frictionless; floor contacts take the floor's condim 3.

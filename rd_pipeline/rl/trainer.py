@@ -53,9 +53,13 @@ def train(
     out_dir.mkdir(parents=True, exist_ok=True)
     obs = env.get_observations()
     log = (out_dir / LOG_FILE).open("a")
+    cores = torch.get_num_threads()
     for iteration in range(start_iteration, iterations):
         began = time.perf_counter()
         lengths, rewards = [], []
+        # While collecting, the physics threads want the cores: torch's idle workers would spin on
+        # them between the policy's small matrix products. The update gets every core.
+        torch.set_num_threads(1)
         with torch.inference_mode():
             for _ in range(ppo.storage.num_transitions_per_env):
                 actions = ppo.act(obs)
@@ -64,6 +68,7 @@ def train(
                 lengths += extras["episode_length"].tolist()
                 rewards.append(reward.mean(0))
             ppo.compute_returns(obs)
+        torch.set_num_threads(cores)
         losses = ppo.update()
         seconds = time.perf_counter() - began
         per_group = torch.stack(rewards).mean(0)
