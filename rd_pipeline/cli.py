@@ -27,11 +27,12 @@ class Run:
     profile: str | None = None
     """Parameter profile: smoke, cpu or paper (default: the params file's, else smoke)."""
     from_: Annotated[str | None, tyro.conf.arg(name="from")] = None
-    """First stage to run; earlier stages must already be cached."""
+    """First stage to run (parse, retarget, import, stats, prior, train, export, validate); earlier
+    stages must already be cached."""
     until: str | None = None
-    """Last stage to run."""
+    """Last stage to run (one of the stages above)."""
     only: str | None = None
-    """Run just this stage."""
+    """Run just this stage (one of the stages above)."""
     force: bool = False
     """Recompute the selected stages even when cached."""
     resume: bool = False

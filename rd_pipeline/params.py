@@ -13,6 +13,23 @@ from rd_pipeline.profiles import load_profile
 DEFAULT_PROFILE = "smoke"
 
 
+class ParamRangeError(ValueError):
+    """A param value outside its range, raised by a params dataclass; the reader adds the stage prefix."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(f"{field} {message}")
+        self.field = field
+        self.message = message
+
+
+def require_positive(params: object, *fields: str) -> None:
+    """Raise `ParamRangeError` for the first of `fields` of `params` that is not > 0."""
+    for field in fields:
+        value = getattr(params, field)
+        if not value > 0:
+            raise ParamRangeError(field, f"must be positive, got {value}")
+
+
 def read_params_file(path: Path, stage_names: list[str]) -> tuple[str | None, dict[str, dict[str, Any]]]:
     """(profile, per-stage values) from a DVC-style params file with a `stages:` table."""
     try:

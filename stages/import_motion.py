@@ -11,6 +11,7 @@ from rd_pipeline import paths
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.contact import ContactThresholds
+from rd_pipeline.params import require_positive
 from rd_pipeline.robots.assets import model_files
 
 
@@ -26,6 +27,9 @@ class ImportParams:
     """Joint and root-position interpolation: `cubic` (smooth velocities) or `linear`."""
     contact: ContactThresholds = ContactThresholds()
     """When a robot foot counts as planted (its height above the clip's ground, and its speed)."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "source_fps", "fps")
 
 
 def _inputs(robot: str | None, motion: str) -> dict[str, Path]:

@@ -9,6 +9,7 @@ from typing import Any
 
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.motion.contact import ContactThresholds
+from rd_pipeline.params import require_positive
 from rd_pipeline.retarget.settings import BodyContactSettings, IkSettings, IkWeights, TargetShaping
 from rd_pipeline.robots.assets import model_files
 
@@ -29,6 +30,9 @@ class RetargetParams:
     """IK task costs."""
     ik: IkSettings = IkSettings()
     """IK iterations, limits and the sequence-level smoothing."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "fps")
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:

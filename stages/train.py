@@ -9,6 +9,7 @@ from typing import Any
 
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.params import require_positive
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.ppo import PpoConfig
 from rd_pipeline.robots.assets import model_files
@@ -36,6 +37,9 @@ class TrainParams:
     """PPO."""
     sampler: SamplerConfig = SamplerConfig()
     """Segment sampler."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "iterations", "checkpoint_every")
 
 
 def clip_frames(clip: str, fps: float, n_frames: int) -> tuple[int, int]:

@@ -7,6 +7,9 @@ from pathlib import Path
 
 import pytest
 from conftest import cli
+from stages import REGISTRY
+
+from rd_pipeline.profiles import PROFILES
 
 
 def test_robots_lists_the_three_configs() -> None:
@@ -52,6 +55,20 @@ def test_a_choice_outside_its_literal_is_refused_when_params_are_read(artifacts:
     assert not (artifacts / "parse").exists()  # refused before any stage ran
 
 
+@pytest.mark.parametrize(("assignment", "message"), [
+    ("train.iterations=0", "parameter 'train.iterations' must be positive, got 0"),
+    ("train.iterations=-1", "parameter 'train.iterations' must be positive, got -1"),
+    ("train.env.num_envs=0", "parameter 'train.env.num_envs' must be positive, got 0"),
+    ("retarget.fps=-50", "parameter 'retarget.fps' must be positive, got -50.0"),
+    ("train.seed=1.5", "parameter 'train.seed' must be an integer, got '1.5'"),
+])
+def test_out_of_range_params_are_one_line_naming_the_parameter(assignment: str, message: str, artifacts: Path) -> None:
+    result = cli("run", "--until", "parse", "--set", assignment)
+    assert result.returncode != 0
+    assert result.stderr.strip().splitlines()[-1] == f"error: {message}"
+    assert not (artifacts / "parse").exists()
+
+
 def test_fetch_lafan_rejects_a_wrong_archive(tmp_path: Path) -> None:
     archive = tmp_path / "lafan1.zip"
     with zipfile.ZipFile(archive, "w") as handle:
@@ -61,3 +78,9 @@ def test_fetch_lafan_rejects_a_wrong_archive(tmp_path: Path) -> None:
     assert result.returncode == 2
     assert f"error: {archive}: sha256 " in result.stderr and "is not the official lafan1.zip" in result.stderr
     assert not target.exists()
+
+
+def test_run_help_names_every_stage_and_profile() -> None:
+    text = " ".join(cli("run", "--help").stdout.split())
+    for name in [stage.name for stage in REGISTRY] + list(PROFILES):
+        assert name in text, name

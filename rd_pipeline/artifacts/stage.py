@@ -20,6 +20,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 
 from rd_pipeline.artifacts.store import ArtifactRef
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.params import ParamRangeError
 
 T = TypeVar("T")
 
@@ -134,7 +135,10 @@ def _override(defaults: Any, values: dict[str, Any], prefix: str) -> Any:
         if not dataclasses.is_dataclass(default):
             raise PipelineError(f"parameter '{prefix}.{name}' has no fields")
         changes[name] = _override(default, group, f"{prefix}.{name}")
-    return dataclasses.replace(defaults, **changes)
+    try:
+        return dataclasses.replace(defaults, **changes)
+    except ParamRangeError as exc:
+        raise PipelineError(f"parameter '{prefix}.{exc.field}' {exc.message}") from None
 
 
 def _coerce(name: str, value: Any, default: Any) -> Any:
@@ -153,14 +157,17 @@ def _coerce(name: str, value: Any, default: Any) -> Any:
         try:
             value = int(text) if kind is int else float(text) if kind is float else value
         except ValueError:
-            raise PipelineError(f"parameter '{name}' must be a {kind.__name__}, got '{value}'") from None
+            raise PipelineError(f"parameter '{name}' must be {_KIND_NAMES[kind]}, got '{value}'") from None
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
     if kind is tuple and isinstance(value, list):
         value = tuple(value)
     if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
-        raise PipelineError(f"parameter '{name}' must be a {kind.__name__}, got {value!r}")
+        raise PipelineError(f"parameter '{name}' must be {_KIND_NAMES.get(kind, 'a ' + kind.__name__)}, got {value!r}")
     return value
+
+
+_KIND_NAMES = {int: "an integer", float: "a number", str: "a string", bool: "true or false", tuple: "a list"}
 
 
 def _number_or_text(text: str) -> int | float | str:

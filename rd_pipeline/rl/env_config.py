@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from rd_pipeline.params import require_positive
 from rd_pipeline.rl.actions import ActionConfig
 from rd_pipeline.rl.curricula import CurriculaCfg
 from rd_pipeline.rl.observations import ObservationsCfg
@@ -91,3 +92,6 @@ class EnvConfig:
     """RSI noise: root linear and angular velocity."""
     randomization: Randomization = Randomization()
     """Domain randomization."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "num_envs", "threads", "physics_dt", "decimation", "history")
