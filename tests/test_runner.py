@@ -115,7 +115,10 @@ def test_unknown_robot_and_motion_are_one_line(artifacts: Path) -> None:
     assert result.stderr.strip().splitlines()[-1].startswith("error: unknown robot 't800'")
     result = cli("run", "--robot", "g1", "--motion", "tango")
     assert result.returncode == 2
-    assert result.stderr.strip().startswith("error: no data for motion 'tango'")
+    line = result.stderr.strip()
+    assert line.startswith("error: no data for motion 'tango'") and len(line.splitlines()) == 1
+    hint = "`rd-pipeline fetch-lafan` downloads LAFAN1's BVH files, or set RD_LAFAN_DIR to a folder that has them"
+    assert line.endswith(hint)
 
 
 def test_cli_cache_hit_and_status_json(artifacts: Path) -> None:

@@ -141,7 +141,10 @@ def resolve_source(robot: str | None, motion: str, forced: str | None) -> str:
     if csv is not None and csv.is_file():
         return "csv"
     where = f"{paths.bvh_path(motion)}" + (f" nor {csv}" if csv else " (and RD_RETARGETED_DIR is not set)")
-    raise PipelineError(f"no data for motion '{motion}': neither {where} exists")
+    raise PipelineError(
+        f"no data for motion '{motion}': neither {where} exists; `rd-pipeline fetch-lafan` downloads "
+        "LAFAN1's BVH files, or set RD_LAFAN_DIR to a folder that has them"
+    )
 
 
 def execute(

@@ -87,13 +87,19 @@ def rsi_state(c: EnvConfig, ref: ReferenceFrames, frames: torch.Tensor, nq: int,
     qpos = torch.zeros(k, nq, dtype=torch.float64, device=device)
     qvel = torch.zeros(k, nv, dtype=torch.float64, device=device)
     joints = len(qpos_idx)
-    qpos[:, :3] = ref.root_pos[frames].double() + host(rng.normal(0, c.rsi_root_pos_m, (k, 3)) * [1, 1, 0])
+    # Draw order is part of the seed's meaning: root position, root rotation, joint positions,
+    # root velocity, joint velocities.
+    root_noise = rng.normal(0, c.rsi_root_pos_m, (k, 3)) * [1, 1, 0]
+    qpos[:, :3] = ref.root_pos[frames].double() + host(root_noise)
     quat = _perturb_quat(ref.root_quat[frames].cpu().numpy(), np.radians(c.rsi_root_rot_deg), rng)
     qpos[:, 3:7] = host(quat)
-    qpos[:, qpos_idx] = ref.joint_pos[frames].double() + host(rng.uniform(-c.rsi_joint_pos, c.rsi_joint_pos, (k, joints)))
-    qvel[:, :3] = ref.root_lin_vel[frames].double() + host(rng.normal(0, c.rsi_root_vel, (k, 3)))
+    joint_noise = rng.uniform(-c.rsi_joint_pos, c.rsi_joint_pos, (k, joints))
+    qpos[:, qpos_idx] = ref.joint_pos[frames].double() + host(joint_noise)
+    root_velocity_noise = rng.normal(0, c.rsi_root_vel, (k, 3))
+    qvel[:, :3] = ref.root_lin_vel[frames].double() + host(root_velocity_noise)
     qvel[:, 3:6] = rotate_inverse(qpos[:, 3:7].float(), ref.root_ang_vel[frames]).double()
-    qvel[:, dof_idx] = ref.joint_vel[frames].double() + host(rng.uniform(-c.rsi_joint_vel, c.rsi_joint_vel, (k, joints)))
+    joint_velocity_noise = rng.uniform(-c.rsi_joint_vel, c.rsi_joint_vel, (k, joints))
+    qvel[:, dof_idx] = ref.joint_vel[frames].double() + host(joint_velocity_noise)
     qpos[:, qpos_idx] = torch.clamp(qpos[:, qpos_idx], joint_range[:, 0], joint_range[:, 1])
     return qpos, qvel
 
