@@ -93,7 +93,10 @@ def status(cmd: Status, console: Console) -> int:
         for row in report["stages"]:
             state = f"[{colors[row['state']]}]{row['state']}[/]"
             table.add_row(row["stage"], state, row["key"] or "-", row["path"] or row.get("reason", ""))
-        Console().print(table)
+        out = Console()
+        if not out.is_terminal:  # piped or logged: whole paths, not a table folded at 80 columns
+            out.width = 1000
+        out.print(table)
     return 0
 
 

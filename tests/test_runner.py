@@ -134,6 +134,10 @@ def test_cli_cache_hit_and_status_json(artifacts: Path) -> None:
     }
     # parse is robot-independent: its artifact belongs to no robot.
     assert states == {(None, "dance1_subject2", "parse"): "cached", ("h1_2", "dance2_subject4", "import"): "cached"}
+    # Piped, the table keeps whole paths on one line.
+    table = cli("status").stdout
+    path = next(s["path"] for p in status["pipelines"] for s in p["stages"] if s["state"] == "cached")
+    assert any(path in line for line in table.splitlines())
 
 
 def test_killed_stage_leaves_no_artifact(artifacts: Path) -> None:
