@@ -28,9 +28,8 @@ import trimesh
 from rd_pipeline import paths
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.rl.sim_model import _pd_spec, simulation_model
+from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
-from rd_pipeline.robots.assets import asset_path
 from rd_pipeline.robots.primitives import fit_collision_meshes, mesh_vertices_in_body
 
 
@@ -52,8 +51,7 @@ def main() -> None:
 def _fit_stats(name: str, picture: Path) -> dict:
     robot = load_robot(name)
     config = robot.config
-    model = _pd_spec(asset_path(config.mjcf), config.joint_names, config.kp, config.kd, config.effort_limit,
-                     0.002).compile()
+    model = simulation_model(robot, collision="mesh")
     shapes = fit_collision_meshes(model, tuple(model.body(b).id for b in config.foot_bodies))
     data = mujoco.MjData(model)
     data.qpos[:] = model.qpos0

@@ -7,9 +7,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from rd_pipeline.rl.sim_model import _pd_spec, simulation_model
+from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
-from rd_pipeline.robots.assets import asset_path
 from rd_pipeline.robots.primitives import fit_collision_meshes, mesh_vertices_in_body
 
 COVER_TOLERANCE_M = 1e-6
@@ -19,9 +18,9 @@ MAX_VOLUME_RATIO = 2.0
 
 
 def _model(name: str) -> tuple[mujoco.MjModel, tuple[str, ...]]:
-    config = load_robot(name).config
-    spec = _pd_spec(asset_path(config.mjcf), config.joint_names, config.kp, config.kd, config.effort_limit, 0.002)
-    return spec.compile(), config.foot_bodies
+    """The robot's mesh model, the one the primitives are fitted to."""
+    robot = load_robot(name)
+    return simulation_model(robot, collision="mesh"), robot.config.foot_bodies
 
 
 def _surface_points(model: mujoco.MjModel, geom: int, rng: np.random.Generator) -> np.ndarray:
@@ -88,7 +87,7 @@ def test_primitive_model_collides_with_the_floor_and_only_in_config_pairs(name: 
     data.qpos[2] = 2.0
     mujoco.mj_forward(model, data)
     feet = {robot.body_ids[f] for f in robot.config.foot_bodies}
-    floor = [g for g in range(model.ngeom) if model.geom_bodyid[g] == 0][0]
+    floor = next(g for g in range(model.ngeom) if model.geom_bodyid[g] == 0)
     soles = [g for g in range(model.ngeom) if model.geom_bodyid[g] in feet]
     data.qpos[2] -= min(mujoco.mj_geomDistance(model, data, floor, g, 3.0, None) for g in soles) - 0.005
     touching = set()

@@ -13,8 +13,8 @@ from conftest import RETARGETED_DIR, cli
 
 from rd_pipeline.artifacts.stage import build_params
 from rd_pipeline.motion.contact import ContactThresholds
-from rd_pipeline.params import parse_assignments
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+from rd_pipeline.params import parse_assignments
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.ppo import PpoConfig, build_ppo

@@ -37,7 +37,7 @@ def plant_foot(
     planted_weight = np.zeros(n)
     lift = np.zeros(n)
     anchors = []
-    half_swing = max(1, int(round(0.5 * drift.swing_s * fps)))
+    half_swing = max(1, round(0.5 * drift.swing_s * fps))
     contact = _split_drifting_plants(contact, free, human_path, drift, half_swing)
     for start, end in contact_runs(contact):
         anchors.append((start, end, np.array([*free[start, :2], sole])))

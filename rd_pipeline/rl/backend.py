@@ -8,6 +8,7 @@ threads fill. The MuJoCo Warp backend implements the same protocol on Warp's arr
 
 from __future__ import annotations
 
+import itertools
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Protocol
@@ -60,6 +61,19 @@ class PhysicsBackend(Protocol):
     def close(self) -> None: ...
 
 
+def state_buffers(num_envs: int, model: mujoco.MjModel) -> tuple[dict[str, np.ndarray], PhysicsState]:
+    """Zeroed numpy buffers for every `PhysicsState` field, and the state as zero-copy torch views
+    of them (CPU backends fill the buffers; the environment reads the views)."""
+    n = num_envs
+    buffers = {
+        "qpos": np.zeros((n, model.nq)), "qvel": np.zeros((n, model.nv)),
+        "body_pos": np.zeros((n, model.nbody, 3)), "body_quat": np.zeros((n, model.nbody, 4)),
+        "body_vel": np.zeros((n, model.nbody, 6)), "actuator_force": np.zeros((n, model.nu)),
+        "contact_force": np.zeros((n, model.nbody, 3)),
+    }
+    return buffers, PhysicsState(**{name: torch.from_numpy(array) for name, array in buffers.items()})
+
+
 def body_velocities(xpos: np.ndarray, cvel: np.ndarray, root_com: np.ndarray) -> np.ndarray:
     """(..., nbody, 6) world [angular, linear] velocity at each body origin from MuJoCo's `cvel`
     (spatial velocity at the tree's centre of mass `root_com` = subtree_com[body_rootid]); what
@@ -87,16 +101,8 @@ class MujocoCpuBackend:
         self.threads = max(1, threads)
         self.pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         bounds = np.linspace(0, self.num_envs, self.threads + 1).astype(int)
-        self.chunks = [range(a, b) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
-        model = models[0]
-        n = self.num_envs
-        self.buffers = {
-            "qpos": np.zeros((n, model.nq)), "qvel": np.zeros((n, model.nv)),
-            "body_pos": np.zeros((n, model.nbody, 3)), "body_quat": np.zeros((n, model.nbody, 4)),
-            "body_vel": np.zeros((n, model.nbody, 6)), "actuator_force": np.zeros((n, model.nu)),
-            "contact_force": np.zeros((n, model.nbody, 3)),
-        }
-        self.state = PhysicsState(**{name: torch.from_numpy(array) for name, array in self.buffers.items()})
+        self.chunks = [range(a, b) for a, b in itertools.pairwise(bounds) if b > a]
+        self.buffers, self.state = state_buffers(self.num_envs, models[0])
 
     def set_state(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
         qpos = qpos.numpy()

@@ -16,7 +16,14 @@ import torch
 
 from rd_pipeline.rl import reward_terms as terms
 from rd_pipeline.rl.reward_terms import (
-    AirTimeTerm, FootForceTerm, PenaltyTerm, SoftLimitTerm, StumbleTerm, TermContext, TrackingState, TrackingTerm,
+    AirTimeTerm,
+    FootForceTerm,
+    PenaltyTerm,
+    SoftLimitTerm,
+    StumbleTerm,
+    TermContext,
+    TrackingState,
+    TrackingTerm,
 )
 
 

@@ -17,8 +17,8 @@ import numpy as np
 import torch
 from mujoco import rollout
 
-from rd_pipeline.rl.backend import PhysicsState
-from rd_pipeline.rl.sim_model import actuator_force_index, body_sensor_index
+from rd_pipeline.rl.backend import PhysicsState, state_buffers
+from rd_pipeline.rl.sim_model import BODY_SENSORS, actuator_force_index, body_sensor_index
 
 STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
 CONTROL = mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_QFRC_APPLIED
@@ -39,20 +39,12 @@ class MujocoRolloutBackend:
         self.nstate = mujoco.mj_stateSize(model, STATE)
         self.qpos_slice = slice(1, 1 + model.nq)  # the state starts with the time
         self.qvel_slice = slice(1 + model.nq, 1 + model.nq + model.nv)
-        self.index = {name: body_sensor_index(model, name) for name in ("pos", "quat", "linvel", "angvel",
-                                                                        "contact_force")}
+        self.index = {name: body_sensor_index(model, name) for name in BODY_SENSORS}
         self.actuator_index = actuator_force_index(model)
-        n = self.num_envs
-        self.full = np.zeros((n, self.nstate))
-        self.sensors = np.zeros((n, model.nsensordata))
-        self.buffers = {
-            "qpos": np.zeros((n, model.nq)), "qvel": np.zeros((n, model.nv)),
-            "body_pos": np.zeros((n, model.nbody, 3)), "body_quat": np.zeros((n, model.nbody, 4)),
-            "body_vel": np.zeros((n, model.nbody, 6)), "actuator_force": np.zeros((n, model.nu)),
-            "contact_force": np.zeros((n, model.nbody, 3)),
-        }
-        self.buffers["body_quat"][:, 0, 0] = 1.0
-        self.state = PhysicsState(**{name: torch.from_numpy(array) for name, array in self.buffers.items()})
+        self.full = np.zeros((self.num_envs, self.nstate))
+        self.sensors = np.zeros((self.num_envs, model.nsensordata))
+        self.buffers, self.state = state_buffers(self.num_envs, model)
+        self.buffers["body_quat"][:, 0, 0] = 1.0  # the world body has no sensor
         self._trajectory = np.zeros((0,))
         self._sensor_trajectory = np.zeros((0,))
 

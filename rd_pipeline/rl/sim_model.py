@@ -20,7 +20,6 @@ from rd_pipeline.robots import Robot
 from rd_pipeline.robots.assets import asset_path
 from rd_pipeline.robots.primitives import fit_collision_meshes
 
-
 CollisionModel = Literal["primitive", "mesh"]
 
 

@@ -9,6 +9,7 @@ contacts) on the floor. Shapes are in the frame of the body that owns them.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import mujoco
@@ -146,7 +147,7 @@ def _slabs(points: np.ndarray, faces: np.ndarray, pieces: int) -> list[np.ndarra
     a = along[edges[:, 0]]
     b = along[edges[:, 1]]
     slabs = []
-    for lo, hi in zip(cuts[:-1], cuts[1:]):
+    for lo, hi in itertools.pairwise(cuts):
         members = [points[(along >= lo) & (along <= hi)]]
         for plane in (lo, hi):
             crossing = (np.minimum(a, b) < plane) & (np.maximum(a, b) > plane)
