@@ -152,6 +152,8 @@ class Sweep:
     """Trials at a time with the local executor."""
     set: tuple[str, ...] = ()
     """Parameter overrides for every trial, `stage.param=value`."""
+    resume: bool = False
+    """Continue interrupted trainings from their last checkpoint (finished trials are cached anyway)."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -6,6 +6,7 @@ import dataclasses
 import json
 import subprocess
 import sys
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from rich.console import Console
@@ -169,12 +170,18 @@ SWEEP_COLUMNS = ("start_zero_survival_s", "zero_action_start_zero_survival_s", "
 """Summary-table columns, from each trial's validate manifest."""
 
 
-def validation_report(trial, profile: str | None):
-    """The `report.json` a sweep trial's run produced (found by its planned key), or None."""
+def trial_artifact(trial, profile: str | None, stage: str) -> Path | None:
+    """The folder of the `stage` artifact a sweep trial's run produced (found by its planned key), or None."""
     pipeline = _pipeline(trial.robot, trial.motion, profile, None, None, trial.assignments, trial.seed)
     planned = {e.stage.name: e for e in pipeline.plan(pipeline.chain())}
-    found = ArtifactStore(paths.artifacts_dir()).find("validate", trial.robot, trial.motion, planned["validate"].key)
-    return found.path / "report.json" if found else None
+    found = ArtifactStore(paths.artifacts_dir()).find(stage, trial.robot, trial.motion, planned[stage].key)
+    return found.path if found else None
+
+
+def validation_report(trial, profile: str | None) -> Path | None:
+    """The `report.json` a sweep trial's run produced, or None."""
+    folder = trial_artifact(trial, profile, "validate")
+    return folder / "report.json" if folder else None
 
 
 def _run_trials(cmd: Sweep, trials, label: str, console: Console):
@@ -195,7 +202,8 @@ def _run_trials(cmd: Sweep, trials, label: str, console: Console):
     described = {"trials": [t.label for t in trials], "sets": [t.assignments for t in trials], "profile": cmd.profile}
     name = f"{label}-{artifact_key('sweep', 1, described, {}, {})[:8]}"
     console.print(f"{label}: {len(trials)} trials ({cmd.executor}), results in {paths.artifacts_dir() / 'sweeps' / name}")
-    results = run_sweep(trials, cmd.profile, cmd.executor, cmd.workers, cmd.ray_address, find_report, on_result)
+    results = run_sweep(trials, cmd.profile, cmd.executor, cmd.workers, cmd.ray_address, find_report, on_result,
+                        resume=cmd.resume)
     out = paths.artifacts_dir() / "sweeps" / name
     summary = write_summary(results, out, SWEEP_COLUMNS)
     table = Table("trial", "status", *SWEEP_COLUMNS, title=f"{label} summary")

@@ -60,8 +60,8 @@ def write_ablation(study: str, table: dict, results: list[TrialResult], out_dir:
     (out_dir / "ablation.json").write_text(json.dumps({"study": study, "table": table, "failed_trials": failed},
                                                       indent=2) + "\n")
     metrics = METRICS[study]
-    lines = [f"# Ablation: {study}", "", "Mean ± 95% Student-t half-width over seeds (n = seeds with a report); "
-             "each seed is the mean over the sweep's robots and motions.", "",
+    lines = [f"# Ablation: {study}", "", ("Mean ± 95% Student-t half-width over seeds (n = seeds with a report); "
+             "each seed is the mean over the sweep's robots and motions."), "",
              "| arm | " + " | ".join(metrics) + " | n |", "|---|" + "---|" * (len(metrics) + 1)]
     for arm, row in table.items():
         cells = []

@@ -68,10 +68,12 @@ def _cli(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
                           cwd=os.getcwd(), check=False)
 
 
-def run_trial(trial: Trial, profile: str | None, env: dict[str, str]) -> tuple[bool, float, str]:
-    """(ok, seconds, last error line) of `rd-pipeline run` for one trial."""
+def run_trial(trial: Trial, profile: str | None, env: dict[str, str], resume: bool = False) -> tuple[bool, float, str]:
+    """(ok, seconds, last error line) of `rd-pipeline run` for one trial; `resume` continues an
+    interrupted training from its last checkpoint."""
     args = ["run", "--robot", trial.robot, "--motion", trial.motion, "--seed", str(trial.seed)]
     args += ["--profile", profile] if profile else []
+    args += ["--resume"] if resume else []
     args += ["--set", *trial.assignments] if trial.assignments else []
     began = time.perf_counter()
     done = _cli(args, env)
@@ -80,7 +82,8 @@ def run_trial(trial: Trial, profile: str | None, env: dict[str, str]) -> tuple[b
 
 
 def run_sweep(trials: list[Trial], profile: str | None, executor: str, workers: int, ray_address: str | None,
-              find_report: Callable[[Trial], Path | None], on_result: Callable[[TrialResult], None]) -> list[TrialResult]:
+              find_report: Callable[[Trial], Path | None], on_result: Callable[[TrialResult], None],
+              resume: bool = False) -> list[TrialResult]:
     """Shared upstream first (once per robot and motion), then every trial; results in trial order."""
     env = {**os.environ, "RD_ARTIFACTS": str(paths.artifacts_dir())}
     shared = sorted({(t.robot, t.motion) for t in trials})
@@ -92,10 +95,10 @@ def run_sweep(trials: list[Trial], profile: str | None, executor: str, workers: 
             upstream_failed[(robot, motion)] = (done.stderr.strip().splitlines() or ["failed"])[-1]
     runnable = [t for t in trials if (t.robot, t.motion) not in upstream_failed]
     if executor == "ray":
-        outcomes = _run_on_ray(runnable, profile, env, ray_address)
+        outcomes = _run_on_ray(runnable, profile, env, ray_address, resume)
     else:
         with ThreadPoolExecutor(max(1, workers)) as pool:
-            outcomes = list(pool.map(lambda t: run_trial(t, profile, env), runnable))
+            outcomes = list(pool.map(lambda t: run_trial(t, profile, env, resume), runnable))
     by_trial = dict(zip(runnable, outcomes))
     results = []
     for trial in trials:
@@ -113,14 +116,15 @@ def run_sweep(trials: list[Trial], profile: str | None, executor: str, workers: 
     return results
 
 
-def _run_on_ray(trials: list[Trial], profile: str | None, env: dict[str, str], address: str | None) -> list:
+def _run_on_ray(trials: list[Trial], profile: str | None, env: dict[str, str], address: str | None,
+                resume: bool) -> list:
     import ray
 
     ray.init(address=address, ignore_reinit_error=True, include_dashboard=False, log_to_driver=False,
              **({} if address else {"num_cpus": os.cpu_count()}))
     remote = ray.remote(num_cpus=1)(run_trial)
     try:
-        return ray.get([remote.remote(t, profile, env) for t in trials])
+        return ray.get([remote.remote(t, profile, env, resume) for t in trials])
     finally:
         ray.shutdown()
 
