@@ -87,6 +87,8 @@ class Status:
     """Parameter profile the keys are computed for."""
     json: bool = False
     """Print JSON instead of a table."""
+    verify: bool = False
+    """Check every file's sha256 against its manifest (file sizes are always checked)."""
     source: str | None = None
     """Force the motion source (`bvh` or `csv`)."""
     set: tuple[str, ...] = ()

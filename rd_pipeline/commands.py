@@ -80,20 +80,22 @@ def status(cmd: Status, console: Console) -> int:
         if robot is None:  # a motion with only robot-independent artifacts so far
             pipeline = dataclasses.replace(pipeline, registry=tuple(s for s in pipeline.registry if not s.per_robot))
         reports.append({"robot": robot, "motion": motion, "source": pipeline.source,
-                        "stages": stage_status(pipeline, store)})
+                        "stages": stage_status(pipeline, store, cmd.verify)})
     if cmd.json:
         print(json.dumps({"artifacts": str(store.root), "pipelines": reports}, indent=2))
         return 0
     if not reports:
         console.print(f"no artifacts in {store.root}")
-    colors = {"cached": "green", "stale": "yellow", "missing": "red"}
+    colors = {"cached": "green", "damaged": "red", "stale": "yellow", "missing": "red"}
     for report in reports:
         table = Table(title=f"{report['robot'] or '(any robot)'}/{report['motion']} ({report['source']})")
         for column in ("stage", "state", "key", "path"):
             table.add_column(column)
         for row in report["stages"]:
             state = f"[{colors[row['state']]}]{row['state']}[/]"
-            table.add_row(row["stage"], state, row["key"] or "-", row["path"] or row.get("reason", ""))
+            where = row["path"] or ""
+            reason = row.get("reason")
+            table.add_row(row["stage"], state, row["key"] or "-", f"{where} ({reason})" if where and reason else reason or where)
         out = Console()
         if not out.is_terminal:  # piped or logged: whole paths, not a table folded at 80 columns
             out.width = 1000

@@ -7,6 +7,7 @@ import shutil
 from dataclasses import dataclass
 from typing import Any
 
+from rd_pipeline.artifacts.files import open_npz
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.params import require_positive
@@ -75,7 +76,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     torch.manual_seed(p.seed)
     robot = load_robot(ctx.robot)
     reference = ReferenceMotion.load(ctx.upstream["reference"].path / REFERENCE_FILE)
-    with np.load(ctx.upstream["sampling_prior"].path / PRIOR_FILE) as prior:
+    with open_npz(ctx.upstream["sampling_prior"].path / PRIOR_FILE) as prior:
         weights, starts, lengths = prior["weights"], prior["starts"], prior["lengths"]
     start, end = clip_frames(p.clip, reference.fps, reference.n_frames)
     keep = (starts >= start) & (starts + lengths <= end)

@@ -7,7 +7,7 @@ import subprocess
 import time
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from functools import lru_cache
+from functools import lru_cache, partial
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +16,7 @@ from rich.console import Console
 from rd_pipeline import __version__, paths
 from rd_pipeline.artifacts.keys import artifact_key, file_sha256
 from rd_pipeline.artifacts.stage import Stage, StageContext, build_params
-from rd_pipeline.artifacts.store import ArtifactRef, ArtifactStore, write_manifest
+from rd_pipeline.artifacts.store import ArtifactRef, ArtifactStore, file_records, write_manifest
 from rd_pipeline.errors import PipelineError
 
 SOURCES = ("bvh", "csv")
@@ -151,48 +151,97 @@ def execute(
     pipeline: Pipeline, store: ArtifactStore, start: str | None = None, until: str | None = None,
     only: str | None = None, force: bool = False, console: Console | None = None, resume: bool = False,
 ) -> list[StageOutcome]:
-    """Run the selected stages; cached artifacts are reused without doing any work."""
+    """Run the selected stages; cached artifacts are reused without doing any work, damaged ones are
+    recomputed, and a key another process is computing is waited for, then reused."""
     console = console or Console(stderr=True)
     selected, before = pipeline.select(start, until, only)
     planned = pipeline.plan(before + selected)
+    usable = _usable_artifacts(pipeline, store, planned, selected, force, console)
     refs: dict[str, ArtifactRef] = {}
     outcomes: list[StageOutcome] = []
     for entry in planned:
         stage = entry.stage
         robot = pipeline.robot if stage.per_robot else None
+        label = _label(robot, pipeline.motion)
         began = time.perf_counter()
-        existing = store.find(stage.name, robot, pipeline.motion, entry.key)
+        existing = usable.get(stage.name)
         if entry.stage in before:
             if existing is None:
                 raise PipelineError(
-                    f"upstream stage '{stage.name}' has no artifact {entry.key} for {_label(robot, pipeline.motion)}; "
+                    f"upstream stage '{stage.name}' has no usable artifact {entry.key} for {label}; "
                     f"run it first (drop --from/--only)"
                 )
             refs[stage.provides] = existing
             continue
-        if existing is not None and not force:
-            refs[stage.provides] = existing
-            seconds = time.perf_counter() - began
-            console.print(f"[green]cached[/] {stage.name:<9} {_label(robot, pipeline.motion)}  {entry.key}  ({seconds:.2f} s, no work)")
-            outcomes.append(StageOutcome(stage.name, entry.key, existing.path, True, seconds))
-            continue
-        console.print(f"[cyan]run[/]    {stage.name:<9} {_label(robot, pipeline.motion)}  {entry.key}")
-        ref = _run_stage(pipeline, store, entry, refs, console, replace=existing is not None, resume=resume)
+        if existing is None:
+            waiting = f"[yellow]wait[/]   {stage.name:<9} {label}  {entry.key}: another run is computing it"
+            with store.locked(stage.name, robot, pipeline.motion, entry.key, on_wait=partial(console.print, waiting)):
+                existing = _made_meanwhile(store, entry, robot, pipeline.motion, force)
+                if existing is None:
+                    console.print(f"[cyan]run[/]    {stage.name:<9} {label}  {entry.key}")
+                    ref = _run_stage(pipeline, store, entry, refs, console, resume=resume)
+                    seconds = time.perf_counter() - began
+                    console.print(f"[green]done[/]   {stage.name:<9} {label}  {entry.key}  ({seconds:.2f} s) -> {ref.path}")
+                    refs[stage.provides] = ref
+                    outcomes.append(StageOutcome(stage.name, entry.key, ref.path, False, seconds))
+                    continue
+        refs[stage.provides] = existing
         seconds = time.perf_counter() - began
-        console.print(f"[green]done[/]   {stage.name:<9} {_label(robot, pipeline.motion)}  {entry.key}  ({seconds:.2f} s) -> {ref.path}")
-        refs[stage.provides] = ref
-        outcomes.append(StageOutcome(stage.name, entry.key, ref.path, False, seconds))
+        console.print(f"[green]cached[/] {stage.name:<9} {label}  {entry.key}  ({seconds:.2f} s, no work)")
+        outcomes.append(StageOutcome(stage.name, entry.key, existing.path, True, seconds))
     return outcomes
+
+
+def _usable_artifacts(
+    pipeline: Pipeline, store: ArtifactStore, planned: list[PlannedStage], selected: list[Stage], force: bool,
+    console: Console,
+) -> dict[str, ArtifactRef]:
+    """Stage name -> its artifact when it exists and is whole.
+
+    Sizes are checked for every artifact; the sha256 of every file is checked for the artifacts a
+    stage of this run will load (those upstream of a stage that runs), and a damaged one is
+    reported and left out, so it is recomputed.
+    """
+    found: dict[str, ArtifactRef] = {}
+    for entry in planned:
+        robot = pipeline.robot if entry.stage.per_robot else None
+        ref = store.find(entry.stage.name, robot, pipeline.motion, entry.key)
+        if ref is not None and not (force and entry.stage in selected) and _whole(ref, False, console):
+            found[entry.stage.name] = ref
+    for entry in reversed(planned):  # a stage recomputed after all loads its own upstream in turn
+        name = entry.stage.name
+        loaded = any(name in later.upstream and later.stage.name not in found for later in planned)
+        if name in found and loaded and not _whole(found[name], True, console):
+            del found[name]
+    return found
+
+
+def _whole(ref: ArtifactRef, full: bool, console: Console) -> bool:
+    problem = ref.damage(full)
+    if problem is not None:
+        console.print(f"[yellow]damaged[/] {ref.path}: {problem}; it will be recomputed", highlight=False)
+    return problem is None
+
+
+def _made_meanwhile(store: ArtifactStore, entry: PlannedStage, robot: str | None, motion: str,
+                    force: bool) -> ArtifactRef | None:
+    """The artifact a concurrent run finished while this one waited for the key's lock (a damaged
+    one found before the wait is still damaged, unless that run replaced it)."""
+    if force:
+        return None
+    ref = store.find(entry.stage.name, robot, motion, entry.key)
+    return ref if ref is not None and ref.damage(full=True) is None else None
 
 
 def _run_stage(
     pipeline: Pipeline, store: ArtifactStore, entry: PlannedStage, refs: dict[str, ArtifactRef],
-    console: Console, replace: bool, resume: bool,
+    console: Console, resume: bool,
 ) -> ArtifactRef:
     stage = entry.stage
     robot = pipeline.robot if stage.per_robot else None
     store.remove_abandoned(stage.name, robot, pipeline.motion)
     began = time.perf_counter()
+    replace = store.find(stage.name, robot, pipeline.motion, entry.key) is not None
     with store.writing(stage.name, robot, pipeline.motion, entry.key, replace=replace) as out:
         context = StageContext(
             robot=robot, motion=pipeline.motion, params=entry.params, inputs=entry.inputs,
@@ -212,6 +261,7 @@ def _run_stage(
             "created_at": datetime.now(UTC).isoformat(timespec="seconds"),
             "duration_s": round(time.perf_counter() - began, 3),
             "metrics": metrics,
+            "files": file_records(out),
         })
     return ArtifactRef(stage.name, entry.key, store.folder(stage.name, robot, pipeline.motion) / entry.key)
 
@@ -232,8 +282,9 @@ def code_version() -> str:
     return f"{__version__}+g{commit}" if commit else __version__
 
 
-def stage_status(pipeline: Pipeline, store: ArtifactStore) -> list[dict[str, Any]]:
-    """Per stage of the chain: key, path and state (cached / stale / missing), or the reason there is no key."""
+def stage_status(pipeline: Pipeline, store: ArtifactStore, verify: bool = False) -> list[dict[str, Any]]:
+    """Per stage of the chain: key, path and state (cached / damaged / stale / missing), or the reason
+    there is no key. File sizes are always checked, their sha256 with `verify`."""
     rows = []
     chain = pipeline.chain()
     for i, stage in enumerate(chain):
@@ -245,8 +296,11 @@ def stage_status(pipeline: Pipeline, store: ArtifactStore) -> list[dict[str, Any
             rows.append({**row, "key": None, "path": None, "state": "missing", "reason": str(exc)})
             continue
         found = store.find(stage.name, robot, pipeline.motion, entry.key)
+        damage = found.damage(verify) if found else None
         others = [k for k in store.keys(stage.name, robot, pipeline.motion) if k != entry.key]
-        state = "cached" if found else ("stale" if others else "missing")
+        state = "damaged" if damage else "cached" if found else "stale" if others else "missing"
         path = store.folder(stage.name, robot, pipeline.motion) / entry.key
         rows.append({**row, "key": entry.key, "path": str(path), "state": state, "other_keys": others})
+        if damage:
+            rows[-1]["reason"] = damage
     return rows

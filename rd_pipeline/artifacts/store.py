@@ -2,22 +2,28 @@
 
 An artifact is written into a hidden temporary sibling folder and renamed into place only after
 its manifest is written, so a crash, Ctrl-C or full disk never leaves a folder that looks complete.
+The manifest lists every file's size and sha256, so a file damaged later is noticed, and one lock
+file per key lets concurrent runs of the same key take turns instead of colliding.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 import shutil
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from rd_pipeline.artifacts.keys import file_sha256
+
 MANIFEST = "manifest.json"
 TEMP_PREFIX = ".tmp-"
+LOCK_PREFIX = ".lock-"
 
 
 @dataclass(frozen=True)
@@ -34,6 +40,27 @@ class ArtifactRef:
     @property
     def manifest(self) -> dict[str, Any]:
         return json.loads((self.path / MANIFEST).read_text())
+
+    def damage(self, full: bool = False) -> str | None:
+        """What is wrong with the artifact's files, or None: the manifest must parse and every file
+        it lists must exist with its recorded size, and with `full` its recorded sha256.
+
+        Artifacts written before manifests listed their files pass on the manifest alone.
+        """
+        try:
+            files = self.manifest.get("files", {})
+        except (OSError, ValueError) as exc:
+            return f"{MANIFEST} cannot be read ({exc})"
+        for name, record in files.items():
+            path = self.path / name
+            if not path.is_file():
+                return f"{name} is missing"
+            size = path.stat().st_size
+            if size != record["size"]:
+                return f"{name} is {size} bytes, the manifest says {record['size']}"
+            if full and file_sha256(path) != record["sha256"]:
+                return f"{name} does not match its sha256 in the manifest"
+        return None
 
 
 class ArtifactStore:
@@ -89,6 +116,34 @@ class ArtifactStore:
             shutil.rmtree(temp, ignore_errors=True)
             raise
 
+    @contextmanager
+    def locked(self, stage: str, robot: str | None, motion: str, key: str,
+               on_wait: Callable[[], None] = lambda: None) -> Iterator[None]:
+        """Hold the key's lock: a second run of the same key waits here (calling `on_wait` once)
+        until the first has finished, then finds its artifact. The lock dies with its process."""
+        folder = self.folder(stage, robot, motion)
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"{LOCK_PREFIX}{key}"
+        waited = False
+        while True:
+            handle = path.open("a")
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                if not waited:
+                    on_wait()
+                    waited = True
+                fcntl.flock(handle, fcntl.LOCK_EX)
+            # The holder before us removes the file on release; a lock on a removed file guards nothing.
+            if _same_file(path, handle):
+                break
+            handle.close()
+        try:
+            yield
+        finally:
+            path.unlink(missing_ok=True)
+            handle.close()
+
     def remove_abandoned(self, stage: str, robot: str | None, motion: str) -> int:
         """Delete temporary folders left by killed processes (whose pid no longer runs)."""
         folder = self.folder(stage, robot, motion)
@@ -106,6 +161,21 @@ def write_manifest(folder: Path, manifest: dict[str, Any]) -> None:
     temp = folder / f"{MANIFEST}.partial"
     temp.write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
     os.replace(temp, folder / MANIFEST)
+
+
+def file_records(folder: Path) -> dict[str, dict[str, Any]]:
+    """Size and sha256 of every file under `folder` (the manifest excepted), by relative path."""
+    records = {}
+    for path in sorted(p for p in folder.rglob("*") if p.is_file() and p.name != MANIFEST):
+        records[str(path.relative_to(folder))] = {"size": path.stat().st_size, "sha256": file_sha256(path)}
+    return records
+
+
+def _same_file(path: Path, handle: Any) -> bool:
+    try:
+        return os.stat(path).st_ino == os.fstat(handle.fileno()).st_ino
+    except FileNotFoundError:
+        return False
 
 
 def _pid_alive(pid: int) -> bool:

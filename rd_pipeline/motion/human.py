@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from rd_pipeline.artifacts.files import open_npz
 from rd_pipeline.motion.bvh import BvhClip, forward_kinematics
 from rd_pipeline.motion.lafan import LAFAN_CM_TO_M, LAFAN_TO_Z_UP  # noqa: F401 (re-exported)
 
@@ -48,7 +49,7 @@ class HumanMotion:
 
     @classmethod
     def load(cls, path: Path) -> HumanMotion:
-        with np.load(path) as data:
+        with open_npz(path) as data:
             return cls(
                 fps=float(data["fps"]), names=tuple(str(n) for n in data["names"]), parents=data["parents"],
                 offsets=data["offsets"], pos_w=data["pos_w"], quat_w=data["quat_w"],

@@ -9,6 +9,7 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from rd_pipeline.artifacts.files import open_npz
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.robots import Robot
 
@@ -67,7 +68,7 @@ class ReferenceMotion:
 
     @classmethod
     def load(cls, path: Path) -> ReferenceMotion:
-        with np.load(path) as data:
+        with open_npz(path) as data:
             missing = [f.name for f in fields(cls) if f.name not in data]
             if missing:
                 raise PipelineError(f"{path}: reference motion lacks field '{missing[0]}'")

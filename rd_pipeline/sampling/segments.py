@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rd_pipeline.artifacts.files import open_npz
+
 SEGMENTS_FILE = "segments.npz"
 """File name of the segment statistics inside a `stats` artifact."""
 
@@ -43,7 +45,7 @@ class SegmentStats:
 
     @classmethod
     def load(cls, path: Path) -> SegmentStats:
-        with np.load(path) as data:
+        with open_npz(path) as data:
             return cls(
                 fps=float(data["fps"]), starts=data["starts"], lengths=data["lengths"],
                 joint_names=tuple(str(n) for n in data["joint_names"]), joint_std=data["joint_std"],

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rd_pipeline.artifacts.files import open_npz
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.retarget_quality import QUALITY_SERIES_FILE
 from rd_pipeline.motion.human import HUMAN_MOTION_FILE, HumanMotion
@@ -37,12 +38,12 @@ def record_motion(robot: str, motion: str, artifact_dirs: dict[str, Path], out: 
                              entity=f"robot/{stage}")
             targets = path.parent / TARGETS_FILE
             if targets.is_file():
-                with np.load(targets) as data:
+                with open_npz(targets) as data:
                     log_points(rec, f"targets/{stage}", data["positions"], reference.fps, TARGET_COLOR, 0.015)
             series = path.parent / QUALITY_SERIES_FILE
             if series.is_file():
                 # The rulers as plots on the same timeline: a bad frame is a spike to click on.
-                with np.load(series) as data:
+                with open_npz(series) as data:
                     for name in data.files:
                         if name.endswith(("_m", "_m_s")):  # measures, not body indices
                             log_series(rec, f"quality/{stage}/{name}", data[name], reference.fps)
@@ -64,7 +65,7 @@ def save_tracked(path: Path, body_pos: np.ndarray, body_quat: np.ndarray, first_
 
 def log_tracked(rec, model, reference: ReferenceMotion, tracked: Path, offset_m: float = 0.0) -> None:
     """The simulated robot of a `tracked.npz` on the reference's frame timeline, shifted `offset_m` along +y."""
-    with np.load(tracked) as data:
+    with open_npz(tracked) as data:
         body_pos, body_quat, first = data["body_pos"], data["body_quat"], int(data["first_frame"])
     names = [n for n in reference.body_names if model.body(n).id > 0]
     ids = [model.body(n).id for n in names]

@@ -1,0 +1,84 @@
+"""Concurrent runs on one store, damaged artifacts: what issue 15 found broken, reproduced."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import PROJECT, cli
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion.reference import ReferenceMotion
+
+CSV_RUN = ("run", "--robot", "h1_2", "--motion", "dance2_subject4", "--until", "stats")
+
+
+def _states(robot: str, motion: str, *extra: str) -> dict[str, dict]:
+    status = json.loads(cli("status", "--robot", robot, "--motion", motion, "--json", *extra).stdout)
+    return {row["stage"]: row for row in status["pipelines"][0]["stages"]}
+
+
+@pytest.mark.slow
+def test_two_runs_of_one_key_started_together_both_succeed(artifacts: Path) -> None:
+    args = [sys.executable, "-m", "rd_pipeline", "run", "--robot", "g1", "--motion", "dance1_subject2",
+            "--until", "train", "--clip", "0:4", "--set", "train.iterations=4", "train.checkpoint_every=2"]
+    runs = [subprocess.Popen(args, cwd=PROJECT, env=os.environ.copy(), stderr=subprocess.PIPE, text=True)
+            for _ in range(2)]
+    errors = [run.communicate(timeout=600)[1] for run in runs]
+    assert [run.returncode for run in runs] == [0, 0], errors
+    train = artifacts / "train" / "g1" / "dance1_subject2"
+    (key,) = list(train.iterdir())  # one artifact, no work, temporary or lock entries left behind
+    rows = (key / "training_log.jsonl").read_text().splitlines()
+    assert [json.loads(row)["iteration"] for row in rows] == [1, 2, 3, 4]
+    # One run did the training, the other waited for it and took its artifact.
+    assert sum("run    train" in e for e in errors) == 1
+    assert sum("cached train" in e for e in errors) == 1
+    leftovers = [p for p in artifacts.rglob(".*") if p.name.startswith((".work-", ".tmp-", ".lock-"))]
+    assert leftovers == []
+
+
+def test_a_truncated_artifact_is_reported_and_recomputed(artifacts: Path) -> None:
+    assert cli(*CSV_RUN).returncode == 0
+    (folder,) = list((artifacts / "import" / "h1_2" / "dance2_subject4").iterdir())
+    reference = folder / "reference.npz"
+    size = reference.stat().st_size
+    reference.write_bytes(reference.read_bytes()[: size // 2])
+    state = _states("h1_2", "dance2_subject4")["import"]
+    assert state["state"] == "damaged"
+    assert state["reason"] == f"reference.npz is {size // 2} bytes, the manifest says {size}"
+    rerun = cli(*CSV_RUN)
+    assert rerun.returncode == 0, rerun.stderr
+    assert f"damaged {folder}: reference.npz is {size // 2} bytes" in " ".join(rerun.stderr.split())
+    assert "run    import" in rerun.stderr and "cached stats" in rerun.stderr
+    assert reference.stat().st_size == size
+    assert _states("h1_2", "dance2_subject4")["import"]["state"] == "cached"
+
+
+def test_a_changed_byte_is_found_by_verify_and_when_a_stage_loads_the_artifact(artifacts: Path) -> None:
+    assert cli(*CSV_RUN).returncode == 0
+    (folder,) = list((artifacts / "import" / "h1_2" / "dance2_subject4").iterdir())
+    reference = folder / "reference.npz"
+    data = bytearray(reference.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    reference.write_bytes(bytes(data))
+    assert _states("h1_2", "dance2_subject4")["import"]["state"] == "cached"  # sizes only
+    verified = _states("h1_2", "dance2_subject4", "--verify")["import"]
+    assert verified["state"] == "damaged"
+    assert verified["reason"] == "reference.npz does not match its sha256 in the manifest"
+    for stats in (artifacts / "stats" / "h1_2" / "dance2_subject4").iterdir():
+        subprocess.run(["rm", "-r", str(stats)], check=True)
+    rerun = cli(*CSV_RUN)  # stats runs again and loads the reference: it is checked, found and recomputed
+    assert rerun.returncode == 0, rerun.stderr
+    assert "does not match its sha256" in rerun.stderr and "run    import" in rerun.stderr
+    assert _states("h1_2", "dance2_subject4", "--verify")["import"]["state"] == "cached"
+
+
+def test_reading_a_damaged_npz_names_the_file(tmp_path: Path) -> None:
+    path = tmp_path / "reference.npz"
+    path.write_bytes(b"PK\x03\x04 not really a zip")
+    with pytest.raises(PipelineError, match=f"^{path}: cannot be read \\(BadZipFile"):
+        ReferenceMotion.load(path)
