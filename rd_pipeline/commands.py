@@ -120,6 +120,7 @@ def _pairs_in_store(store: ArtifactStore, robot: str | None, motion: str | None)
 
 def view(cmd: View, console: Console) -> int:
     from rd_pipeline.viz.recording import TRACKED_FILE, record_motion
+    from rd_pipeline.viz.rerun_view import display_available
 
     pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, cmd.source, None, ())
     store = ArtifactStore(paths.artifacts_dir())
@@ -131,9 +132,13 @@ def view(cmd: View, console: Console) -> int:
     planned = {entry.stage.name: entry for entry in pipeline.plan(pipeline.chain())}
     validated = store.find("validate", cmd.robot, cmd.motion, planned["validate"].key) if "validate" in planned else None
     tracked = validated.path / TRACKED_FILE if validated else None
-    path = record_motion(cmd.robot, cmd.motion, artifacts, cmd.out, tracked)
+    out = cmd.out
+    if out is None and not display_available():
+        out = store.root / "views" / f"{cmd.robot}_{cmd.motion}.rrd"
+        console.print("no display here (DISPLAY and WAYLAND_DISPLAY are unset): writing the recording instead")
+    path = record_motion(cmd.robot, cmd.motion, artifacts, out, tracked)
     if path is not None:
-        console.print(f"wrote {path}")
+        console.print(f"wrote {path}; open it with `rerun {path}` (pip package rerun-sdk) on a machine with a display")
         if cmd.spawn:
             subprocess.Popen([sys.executable, "-m", "rerun", str(path)])
     return 0

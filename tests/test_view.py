@@ -45,3 +45,12 @@ def test_view_imported_robot_reference(artifacts: Path, tmp_path: Path) -> None:
     assert plots == {f"/quality/import/{name}": 11285 for name in ("penetration_m", "root_speed_m_s")}
     assert sorted(rows) == sorted(f"/robot/import/{b}" for b in load_robot("h1").body_names)
     assert set(rows.values()) == {11285}
+
+
+def test_view_without_a_display_writes_the_recording_and_says_how_to_open_it(artifacts: Path) -> None:
+    result = cli("view", "--robot", "h1", "--motion", "dance2_subject3", env={"DISPLAY": "", "WAYLAND_DISPLAY": ""})
+    assert result.returncode == 0, result.stderr
+    out = artifacts / "views" / "h1_dance2_subject3.rrd"
+    message = " ".join(result.stderr.split())
+    assert f"wrote {out}; open it with `rerun {out}`" in message
+    assert _rows_per_entity(out)["/robot/import/pelvis"] == 11285

@@ -6,6 +6,8 @@ in well under a second.
 
 from __future__ import annotations
 
+import os
+import sys
 from pathlib import Path
 
 import mujoco
@@ -103,6 +105,11 @@ def log_points(rec: rr.RecordingStream, entity: str, positions: np.ndarray, fps:
 def log_series(rec: rr.RecordingStream, entity: str, values: np.ndarray, fps: float) -> None:
     """A per-frame number as a plot on the motion's timeline (keypoint error, penetration, ...)."""
     rec.send_columns(entity, indexes=_times(len(values), fps), columns=rr.Scalars.columns(scalars=values))
+
+
+def display_available() -> bool:
+    """Whether a spawned viewer window could open here (a spawn without one waits forever)."""
+    return sys.platform in ("darwin", "win32") or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
 def open_recording(name: str, out: Path | None) -> rr.RecordingStream:
