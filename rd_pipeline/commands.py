@@ -52,9 +52,31 @@ def run(cmd: Run, console: Console) -> int:
     pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, cmd.source, cmd.params_file, assignments, cmd.seed)
     store = ArtifactStore(paths.artifacts_dir())
     console.print(f"rd-pipeline: {cmd.robot}/{cmd.motion} from {pipeline.source}, artifacts in {store.root}")
-    execute(pipeline, store, start=cmd.from_, until=cmd.until, only=cmd.only, force=cmd.force, console=console,
-            resume=cmd.resume)
+    outcomes = execute(pipeline, store, start=cmd.from_, until=cmd.until, only=cmd.only, force=cmd.force,
+                       console=console, resume=cmd.resume)
+    print_summary(pipeline, outcomes, console)
     return 0
+
+
+def print_summary(pipeline: Pipeline, outcomes: list, console: Console) -> None:
+    """Per stage: cached or ran, time, headline metrics; then the report to read."""
+    stages = {s.name: s for s in pipeline.registry}
+    console.print(f"summary {pipeline.robot}/{pipeline.motion}:", highlight=False)
+    report = None
+    for outcome in outcomes:
+        stage = stages[outcome.name]
+        metrics = json.loads((outcome.path / "manifest.json").read_text()).get("metrics", {})
+        shown = "  ".join(f"{name}={_short(metrics[name])}" for name in stage.headline if name in metrics)
+        state = "cached" if outcome.cached else "ran"
+        console.print(f"  {outcome.name:<9} {state:<6} {outcome.seconds:7.1f} s  {shown}", highlight=False)
+        if stage.report:
+            report = outcome.path / stage.report
+    if report is not None:
+        console.print(f"report: {report}", highlight=False)
+
+
+def _short(value: object) -> str:
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
 def stage(cmd: StageCommand, console: Console) -> int:

@@ -64,4 +64,5 @@ STAGE = Stage(
     run=_run,
     inputs=lambda robot, motion: model_files(robot),
     requires=("policy",),
+    headline=("num_actions", "action_mode"),
 )

@@ -85,4 +85,5 @@ STAGE = Stage(
     run=_run,
     inputs=_inputs,
     source="csv",
+    headline=("duration_s", "penetration_max_mm"),
 )

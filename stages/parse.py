@@ -52,4 +52,5 @@ STAGE = Stage(
     inputs=_inputs,
     source="bvh",
     per_robot=False,
+    headline=("frames", "duration_s"),
 )

@@ -55,4 +55,5 @@ STAGE = Stage(
     provides="sampling_prior",
     run=_run,
     requires=("segment_stats",),
+    headline=("segments_with_weight", "weight_max_over_uniform"),
 )

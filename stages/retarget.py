@@ -84,4 +84,5 @@ STAGE = Stage(
     run=_run,
     inputs=lambda robot, motion: model_files(robot),
     requires=("human_motion",),
+    headline=("diverged_frames", "penetration_max_mm", "keypoint_error_p95_mm", "fps_frames_per_s"),
 )

@@ -75,4 +75,5 @@ STAGE = Stage(
     run=_run,
     inputs=lambda robot, motion: model_files(robot),
     requires=("reference",),
+    headline=("segments",),
 )

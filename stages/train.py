@@ -129,4 +129,5 @@ STAGE = Stage(
     run=_run,
     inputs=lambda robot, motion: model_files(robot),
     requires=("reference", "sampling_prior"),
+    headline=("iterations", "final_episode_length_s", "samples_per_s_median"),
 )

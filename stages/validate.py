@@ -125,4 +125,6 @@ STAGE = Stage(
     run=_run,
     inputs=lambda robot, motion: model_files(robot),
     requires=("deployable_policy", "reference"),
+    headline=("start_zero_survival_s", "zero_action_start_zero_survival_s", "completion_pct", "E_g_mpbpe"),
+    report="report.md",
 )

@@ -39,6 +39,14 @@ def test_two_runs_of_one_key_started_together_both_succeed(artifacts: Path) -> N
     assert sum("cached train" in e for e in errors) == 1
     leftovers = [p for p in artifacts.rglob(".*") if p.name.startswith((".work-", ".tmp-", ".lock-"))]
     assert leftovers == []
+    # Piped, progress is plain lines (no blank lines left by a live display), and a summary ends the run.
+    trainer = next(e for e in errors if "run    train" in e)
+    assert "" not in trainer.splitlines()
+    assert "  PPO g1: 4/4 (" in trainer
+    summary = trainer[trainer.index("summary g1/dance1_subject2:"):].splitlines()
+    assert [line.split()[0] for line in summary[1:]] == ["parse", "retarget", "stats", "prior", "train"]
+    assert summary[-1].split()[1] == "ran"  # the other run may have computed the upstream stages
+    assert "iterations=4" in summary[-1]
 
 
 def test_a_truncated_artifact_is_reported_and_recomputed(artifacts: Path) -> None:

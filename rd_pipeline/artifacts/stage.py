@@ -8,6 +8,7 @@ of one source and orders them by these roles, so adding a stage never touches th
 from __future__ import annotations
 
 import dataclasses
+import time
 import typing
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
@@ -57,7 +58,13 @@ class StageContext:
 
     @contextmanager
     def progress(self, total: int, description: str) -> Iterator[Callable[..., None]]:
-        """A progress bar with ETA; the yielded `advance(status="...")` moves it and shows a status line."""
+        """A progress bar with ETA; the yielded `advance(status="...")` moves it and shows a status line.
+
+        Off a terminal (a log, a pipe) it prints a plain line at every tenth of the work instead.
+        """
+        if not self.console.is_terminal:
+            yield _plain_progress(self.console, total, description)
+            return
         columns = (TextColumn("  {task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                    TimeElapsedColumn(), TimeRemainingColumn(), TextColumn("{task.fields[status]}"))
         with Progress(*columns, console=self.console, transient=True) as bar:
@@ -67,6 +74,21 @@ class StageContext:
                 bar.update(task, advance=1, status=status)
 
             yield advance
+
+
+def _plain_progress(console: Console, total: int, description: str) -> Callable[..., None]:
+    began = time.perf_counter()
+    done = 0
+    step = max(1, total // 10)
+
+    def advance(status: str = "") -> None:
+        nonlocal done
+        done += 1
+        if done % step == 0 or done == total:
+            minutes = (time.perf_counter() - began) / 60
+            console.print(f"  {description}: {done}/{total} ({minutes:.1f} min)  {status}", highlight=False)
+
+    return advance
 
 
 @dataclass(frozen=True)
@@ -93,6 +115,10 @@ class Stage:
     """For head stages: the raw-data source they read (`bvh` or `csv`)."""
     per_robot: bool = True
     """Whether artifacts are per robot (`<stage>/<robot>/<motion>`) or shared (`<stage>/<motion>`)."""
+    headline: tuple[str, ...] = ()
+    """Manifest metrics shown in the summary at the end of a run."""
+    report: str | None = None
+    """A file of the artifact people read first (shown at the end of a run)."""
 
 
 def build_params(stage: Stage, values: dict[str, Any]) -> Any:
