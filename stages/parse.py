@@ -8,6 +8,8 @@ from typing import Any
 
 from rd_pipeline import paths
 from rd_pipeline.artifacts.stage import Stage, StageContext
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion import too_short
 from rd_pipeline.motion.lafan import LAFAN_CM_TO_M
 
 
@@ -28,6 +30,9 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.motion.human import HUMAN_MOTION_FILE, LAFAN_TO_Z_UP, human_motion_from_bvh
 
     clip = read_bvh(ctx.inputs["bvh"])
+    short = too_short(str(ctx.inputs["bvh"]), clip.channels.shape[0], 1.0 / clip.frame_time)
+    if short:
+        raise PipelineError(short)
     for warning in clip.warnings:
         ctx.console.print(f"[yellow]warning:[/] {warning}", highlight=False, soft_wrap=True)
     human = human_motion_from_bvh(clip, ctx.params.length_unit_m, LAFAN_TO_Z_UP)

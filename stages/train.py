@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import json
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from rd_pipeline.artifacts.files import open_npz
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion import MIN_MOTION_S
 from rd_pipeline.params import require_positive
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.ppo import PpoConfig
@@ -43,18 +45,24 @@ class TrainParams:
         require_positive(self, "iterations", "checkpoint_every")
 
 
-def clip_frames(clip: str, fps: float, n_frames: int) -> tuple[int, int]:
-    """`START:END` seconds -> [start, end) frames of the reference."""
+def clip_frames(clip: str, fps: float, n_frames: int, warn: Callable[[str], None] = print) -> tuple[int, int]:
+    """`START:END` seconds -> [start, end) frames of the reference; an END past the motion's end is
+    clamped to it, and `warn` says so."""
     if not clip:
         return 0, n_frames
     try:
         start_s, end_s = (float(x) if x else None for x in clip.split(":"))
     except ValueError:
         raise PipelineError(f"train.clip must be START:END in seconds, got '{clip}'") from None
-    start = int(round((start_s or 0.0) * fps))
-    end = n_frames if end_s is None else min(n_frames, int(round(end_s * fps)))
-    if not 0 <= start < end - fps:
-        raise PipelineError(f"train.clip '{clip}' leaves less than one second of the {n_frames / fps:.1f} s motion")
+    start = round((start_s or 0.0) * fps)
+    end = n_frames if end_s is None else round(end_s * fps)
+    if end > n_frames:
+        warn(f"train.clip '{clip}' ends after the {n_frames / fps:.2f} s motion: training on {start / fps:g}:{n_frames / fps:.2f}")
+        end = n_frames
+    if not 0 <= start < end - fps * MIN_MOTION_S:
+        raise PipelineError(
+            f"train.clip '{clip}' leaves less than {MIN_MOTION_S:g} s of the {n_frames / fps:.2f} s motion"
+        )
     return start, end
 
 
@@ -78,7 +86,8 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     reference = ReferenceMotion.load(ctx.upstream["reference"].path / REFERENCE_FILE)
     with open_npz(ctx.upstream["sampling_prior"].path / PRIOR_FILE) as prior:
         weights, starts, lengths = prior["weights"], prior["starts"], prior["lengths"]
-    start, end = clip_frames(p.clip, reference.fps, reference.n_frames)
+    warn = lambda message: ctx.console.print(f"[yellow]warning:[/] {message}", highlight=False)
+    start, end = clip_frames(p.clip, reference.fps, reference.n_frames, warn)
     keep = (starts >= start) & (starts + lengths <= end)
     reference = reference.frames(start, end)
     starts, lengths, weights = starts[keep] - start, lengths[keep], weights[keep]

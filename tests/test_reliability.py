@@ -9,10 +9,11 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import PROJECT, cli
+from conftest import LAFAN_DIR, PROJECT, RETARGETED_DIR, cli
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
+from stages.train import clip_frames
 
 CSV_RUN = ("run", "--robot", "h1_2", "--motion", "dance2_subject4", "--until", "stats")
 
@@ -90,3 +91,37 @@ def test_reading_a_damaged_npz_names_the_file(tmp_path: Path) -> None:
     path.write_bytes(b"PK\x03\x04 not really a zip")
     with pytest.raises(PipelineError, match=f"^{path}: cannot be read \\(BadZipFile"):
         ReferenceMotion.load(path)
+
+
+def test_a_three_frame_bvh_is_refused_by_parse_with_the_minimum(tmp_path: Path) -> None:
+    lines = (LAFAN_DIR / "dance1_subject2.bvh").read_text().splitlines()
+    header = lines.index("MOTION")
+    short = [*lines[: header + 1], "Frames: 3", lines[header + 2], *lines[header + 3 : header + 6]]
+    path = tmp_path / "dance1_subject2.bvh"
+    path.write_text("\n".join(short) + "\n")
+    result = cli("run", "--robot", "g1", "--motion", "dance1_subject2", "--until", "parse",
+                 env={"RD_LAFAN_DIR": str(tmp_path), "RD_ARTIFACTS": str(tmp_path / "store")})
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
+    assert errors == [f"error: {path}: 3 frames at 30 fps is 0.10 s; a motion must last at least 1 s"]
+
+
+@pytest.mark.parametrize("rows", [2, 3, 29])
+def test_a_csv_of_a_few_rows_is_refused_with_the_minimum(rows: int, tmp_path: Path) -> None:
+    source = (RETARGETED_DIR / "h1" / "dance1_subject1.csv").read_text().splitlines()
+    path = tmp_path / "h1" / "dance1_subject1.csv"
+    path.parent.mkdir()
+    path.write_text("\n".join(source[:rows]) + "\n")
+    result = cli("stage", "import", "--robot", "h1", "--motion", "dance1_subject1",
+                 env={"RD_RETARGETED_DIR": str(tmp_path), "RD_ARTIFACTS": str(tmp_path / "store")})
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    seconds = f"{rows / 30:.2f}"
+    assert f"error: {path}: {rows} frames at 30 fps is {seconds} s; a motion must last at least 1 s" in result.stderr
+
+
+def test_a_clip_past_the_end_is_clamped_and_said() -> None:
+    said = []
+    assert clip_frames("125:1000", 50.0, 6575, said.append) == (6250, 6575)
+    assert said == ["train.clip '125:1000' ends after the 131.50 s motion: training on 125:131.50"]
+    with pytest.raises(PipelineError, match=r"^train.clip '0:0.1' leaves less than 1 s of the 131.50 s motion$"):
+        clip_frames("0:0.1", 50.0, 6575, said.append)

@@ -11,6 +11,7 @@ from scipy.interpolate import interp1d
 from scipy.spatial.transform import Rotation, Slerp
 
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion import too_short
 from rd_pipeline.motion.bvh import is_float
 from rd_pipeline.motion.contact import ContactThresholds, label_contacts
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
@@ -70,6 +71,9 @@ def import_retargeted_csv(
     dropped = tuple(j for j in config.csv_joints if j not in config.joint_names)
 
     n_source = table.shape[0]
+    short = too_short(str(path), n_source, source_fps)
+    if short:
+        raise PipelineError(short)
     source_t = np.arange(n_source) / source_fps
     # Same duration as the source (frames / fps); the last target sample holds the last source frame.
     n_target = int(round(n_source * target_fps / source_fps))
