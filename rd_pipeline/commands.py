@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
 
 def _registry():
-    from stages import REGISTRY
+    from rd_pipeline.stages import REGISTRY
 
     return REGISTRY
 

@@ -5,13 +5,15 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from rd_pipeline import robot_configs
 from rd_pipeline.errors import PipelineError
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
-"""The checkout holding the package and `robots/`. Data paths are relative to the working directory,
-as DVC runs commands from the project root."""
+"""The checkout holding the package (in an installed copy: site-packages). Data paths are relative
+to the working directory, as DVC runs commands from the project root."""
 
-ROBOT_CONFIG_DIR = PROJECT_ROOT / "robots"
+ROBOT_CONFIG_DIR = Path(robot_configs.__file__).parent
+"""The robots' TOML configurations: `robots/` of the checkout, installed as `rd_pipeline.robot_configs`."""
 
 
 def _env_path(name: str, default: Path | None) -> Path | None:

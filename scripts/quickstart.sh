@@ -23,5 +23,12 @@ if [ -d ../shared/data ]; then
 fi
 
 if [ -z "${SKIP_RUN:-}" ]; then
+  if ! .venv/bin/rd-pipeline motions >/dev/null 2>&1; then
+    echo "quickstart: no LAFAN1 data found; downloading it (rd-pipeline fetch-lafan)"
+    if ! .venv/bin/rd-pipeline fetch-lafan; then
+      echo "quickstart: no motion data: run \`.venv/bin/rd-pipeline fetch-lafan\` where lafan1.zip can be downloaded, or set RD_LAFAN_DIR (LAFAN1 BVH files) or RD_RETARGETED_DIR (dataset CSVs) and rerun" >&2
+      exit 1
+    fi
+  fi
   .venv/bin/rd-pipeline run
 fi

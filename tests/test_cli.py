@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 from conftest import cli
+from rd_pipeline.stages import REGISTRY
 
 from rd_pipeline.profiles import PROFILES
-from stages import REGISTRY
 
 
 def test_robots_lists_the_three_configs() -> None:

@@ -11,8 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 from conftest import LAFAN_DIR, PROJECT
-
-from stages import stage_names
+from rd_pipeline.stages import stage_names
 
 
 def test_dvc_stages_are_the_registry() -> None:

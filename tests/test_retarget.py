@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import LAFAN_DIR, cli
+from rd_pipeline.stages.retarget import RetargetParams
 from scipy.spatial.transform import Rotation
 
 from rd_pipeline.errors import PipelineError
@@ -18,7 +19,6 @@ from rd_pipeline.motion.contact import contact_runs
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.robots import load_robot
-from stages.retarget import RetargetParams
 
 SPEC_QUALITY_KEYS = {
     "fps_frames_per_s", "penetration_max_mm", "penetration_p95_mm", "skate_stance_mean_mm_s",
