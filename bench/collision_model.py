@@ -79,29 +79,39 @@ def _fit_stats(name: str, picture: Path) -> dict:
     fig.tight_layout()
     fig.savefig(picture, dpi=110)
     plt.close(fig)
-    return {"meshes": len(ratios), "primitives": len(shapes), "volume_ratio_median": round(float(np.median(ratios)), 2),
-            "volume_ratio_max": round(float(np.max(ratios)), 2), "picture": str(picture)}
+    return {
+        "meshes": len(ratios),
+        "primitives": len(shapes),
+        "volume_ratio_median": round(float(np.median(ratios)), 2),
+        "volume_ratio_max": round(float(np.max(ratios)), 2),
+        "picture": str(picture),
+    }
 
 
 def _box_edges(pos: np.ndarray, quat: np.ndarray, size: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     rotation = np.empty(9)
     mujoco.mju_quat2Mat(rotation, quat)
-    corners = {signs: pos + rotation.reshape(3, 3) @ (np.array(signs) * size)
-               for signs in itertools.product((-1, 1), repeat=3)}
-    return [(corners[a], corners[b]) for a in corners for b in corners if sum(x != y for x, y in zip(a, b)) == 1 and a < b]
+    corners = {
+        signs: pos + rotation.reshape(3, 3) @ (np.array(signs) * size) for signs in itertools.product((-1, 1), repeat=3)
+    }
+    return [
+        (corners[a], corners[b]) for a in corners for b in corners if sum(x != y for x, y in zip(a, b)) == 1 and a < b
+    ]
 
 
 def _step_rates(name: str, repeats: int) -> dict:
     robot = load_robot(name)
-    reference = import_retargeted_csv(paths.csv_path(name, "dance1_subject2"), robot, 30.0, 50.0, "cubic",
-                                      ContactThresholds()).reference
+    reference = import_retargeted_csv(
+        paths.csv_path(name, "dance1_subject2"), robot, 30.0, 50.0, "cubic", ContactThresholds()
+    ).reference
     models = {kind: simulation_model(robot, collision=kind) for kind in ("mesh", "primitive")}
     rates: dict[str, list[float]] = {}
     for _ in range(repeats):  # interleaved: both models see the same machine state
         for kind, model in models.items():
             for pushed in (False, True):
                 rates.setdefault(f"{kind}_{'fallen' if pushed else 'standing'}", []).append(
-                    _rate(robot, model, reference, pushed))
+                    _rate(robot, model, reference, pushed)
+                )
     out = {f"steps_per_s_{key}": round(float(np.median(values))) for key, values in rates.items()}
     for case in ("standing", "fallen"):
         out[f"speedup_{case}"] = round(out[f"steps_per_s_primitive_{case}"] / out[f"steps_per_s_mesh_{case}"], 2)

@@ -62,8 +62,9 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("bench/results/env_throughput.json"))
     args = parser.parse_args()
     robot = load_robot(args.robot)
-    reference = import_retargeted_csv(paths.csv_path(args.robot, args.motion), robot, 30.0, 50.0, "cubic",
-                                      ContactThresholds()).reference
+    reference = import_retargeted_csv(
+        paths.csv_path(args.robot, args.motion), robot, 30.0, 50.0, "cubic", ContactThresholds()
+    ).reference
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
     envs = {}
     memory_mb = {}
@@ -75,20 +76,29 @@ def main() -> None:
         envs[name] = TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=0)
         memory_mb[name] = (_rss_mb() - before) / args.envs
     rates = {name: {"env": [], "raw": [], "ppo": []} for name in envs}
-    ppos = {name: build_ppo(env.get_observations(), args.envs, env.num_actions, len(GROUPS), PpoConfig(),
-                            env.config.device) for name, env in envs.items()}
+    ppos = {
+        name: build_ppo(env.get_observations(), args.envs, env.num_actions, len(GROUPS), PpoConfig(), env.config.device)
+        for name, env in envs.items()
+    }
     for _ in range(args.repeats):
         for name, env in envs.items():
             rate, calls = _env_rate(env)
             rates[name]["env"].append(rate)
             rates[name]["raw"].append(_raw_rate(env, args.threads, calls))
             rates[name]["ppo"].append(_ppo_rate(env, ppos[name]))
-    result = {"robot": args.robot, "motion": args.motion, "envs": args.envs, "threads": args.threads,
-              "repeats": args.repeats, "paths": {}}
+    result = {
+        "robot": args.robot,
+        "motion": args.motion,
+        "envs": args.envs,
+        "threads": args.threads,
+        "repeats": args.repeats,
+        "paths": {},
+    }
     for name, measured in rates.items():
         env = envs[name]
         result["paths"][name] = {
-            **PATHS[name], "cpu_memory_mb_per_env": round(memory_mb[name], 2),
+            **PATHS[name],
+            "cpu_memory_mb_per_env": round(memory_mb[name], 2),
             "env_physics_steps_per_s": round(statistics.median(measured["env"])),
             "raw_batched_steps_per_s": round(statistics.median(measured["raw"])),
             "ppo_samples_per_s_including_update": round(statistics.median(measured["ppo"]), 1),
@@ -98,7 +108,9 @@ def main() -> None:
     line = ""
     if "old" in rates and "new" in rates:
         new = result["paths"]["new"]
-        speedup = new["ppo_samples_per_s_including_update"] / result["paths"]["old"]["ppo_samples_per_s_including_update"]
+        speedup = (
+            new["ppo_samples_per_s_including_update"] / result["paths"]["old"]["ppo_samples_per_s_including_update"]
+        )
         ratio = new["env_physics_steps_per_s"] / new["raw_batched_steps_per_s"]
         result["speedup"] = round(speedup, 2)
         result["physics_ratio"] = round(ratio, 3)
@@ -150,8 +162,17 @@ def _raw_rate(env: TrackingEnv, threads: int, calls: list, control_steps: int = 
         for models, states, controls, nstep in calls:
             trajectory = np.zeros((len(states), nstep, backend.nstate))
             sensors = np.zeros((len(states), nstep, model.nsensordata))
-            backend.pool.rollout(models, backend.datas, states, controls, control_spec=CONTROL, nstep=nstep,
-                                 state=trajectory, sensordata=sensors, skip_checks=True)
+            backend.pool.rollout(
+                models,
+                backend.datas,
+                states,
+                controls,
+                control_spec=CONTROL,
+                nstep=nstep,
+                state=trajectory,
+                sensordata=sensors,
+                skip_checks=True,
+            )
             steps += len(states) * nstep
         return steps / (time.perf_counter() - began)
     if env.config.backend == "warp":

@@ -39,8 +39,11 @@ def main() -> None:
                 times.append(time.perf_counter() - began)
     times.sort()
     result = {
-        "robot": spec.get("robot"), "observation_size": spec.get("observation.size"),
-        "actions": len(spec.get("action.outputs")), "threads": 1, "calls": len(times),
+        "robot": spec.get("robot"),
+        "observation_size": spec.get("observation.size"),
+        "actions": len(spec.get("action.outputs")),
+        "threads": 1,
+        "calls": len(times),
         "median_ms": round(1000 * statistics.median(times), 4),
         "p99_ms": round(1000 * times[int(0.99 * len(times))], 4),
         "bar_ms": 1.0,

@@ -39,8 +39,9 @@ def main() -> None:
     parser.add_argument("--profile", default="cpu")
     parser.add_argument("--clip", default="0:10")
     parser.add_argument("--checkpoints", type=Path, required=True)
-    parser.add_argument("--set", nargs="*", default=[],
-                        help="overrides the run used, e.g. train.env.actions.mode=selective")
+    parser.add_argument(
+        "--set", nargs="*", default=[], help="overrides the run used, e.g. train.env.actions.mode=selective"
+    )
     parser.add_argument("--out", type=Path, default=Path("bench/results/learning.json"))
     args = parser.parse_args()
     registry = {stage.name: stage for stage in REGISTRY}
@@ -64,13 +65,15 @@ def main() -> None:
     env = make_env()
     zero = float(survival(env, zero_action(env.num_actions), torch.tensor([0]))[0])
     rows = {"clip_s": reference.n_frames / 50.0, "zero_action_survival_s": zero, "checkpoints": {}}
-    checkpoint_dir = args.checkpoints / "checkpoints" if (args.checkpoints / "checkpoints").is_dir() else args.checkpoints
+    checkpoint_dir = (
+        args.checkpoints / "checkpoints" if (args.checkpoints / "checkpoints").is_dir() else args.checkpoints
+    )
     for path in sorted(checkpoint_dir.glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[1])):
         env = make_env()
         ppo = build_ppo(env.get_observations(), 1, env.num_actions, len(GROUPS), params.ppo)
         ppo.load(torch.load(path, weights_only=False)["algorithm"], None, strict=True)
         ppo.eval_mode()
-        mean_action = lambda obs: ppo.actor(obs, stochastic_output=False)
+        mean_action = lambda obs, ppo=ppo: ppo.actor(obs, stochastic_output=False)
         rows["checkpoints"][path.stem] = float(survival(env, mean_action, torch.tensor([0]))[0])
         print(path.stem, rows["checkpoints"][path.stem], flush=True)
     best = max(rows["checkpoints"].values())

@@ -33,12 +33,24 @@ ROBOT = "g1"
 VALIDATION = ("start_zero_s", "completion_pct", "mean_survival_s", *ERROR_METRICS)
 """Table columns: start-zero survival, then the nominal policy's fixed-grid figures."""
 PAPER_TABLE_R5 = {
-    "absolute": {"completion_pct": "23.6 ± 3.9", "mean_survival_s": "37.2 ± 15.5", "E_mpbpe": "445.4 ± 55.3",
-                 "E_mpjpe": "174.0 ± 12.4"},
-    "selective": {"completion_pct": "38.6 ± 22.6", "mean_survival_s": "45.0 ± 15.7", "E_mpbpe": "424.2 ± 37.4",
-                  "E_mpjpe": "163.9 ± 3.4"},
-    "all": {"completion_pct": "24.3 ± 74.8", "mean_survival_s": "37.0 ± 49.5", "E_mpbpe": "682.0 ± 190.7",
-            "E_mpjpe": "124.6 ± 42.4"},
+    "absolute": {
+        "completion_pct": "23.6 ± 3.9",
+        "mean_survival_s": "37.2 ± 15.5",
+        "E_mpbpe": "445.4 ± 55.3",
+        "E_mpjpe": "174.0 ± 12.4",
+    },
+    "selective": {
+        "completion_pct": "38.6 ± 22.6",
+        "mean_survival_s": "45.0 ± 15.7",
+        "E_mpbpe": "424.2 ± 37.4",
+        "E_mpjpe": "163.9 ± 3.4",
+    },
+    "all": {
+        "completion_pct": "24.3 ± 74.8",
+        "mean_survival_s": "37.0 ± 49.5",
+        "E_mpbpe": "682.0 ± 190.7",
+        "E_mpjpe": "124.6 ± 42.4",
+    },
 }
 """The paper's Table r5 (dance2_subject4, 3 seeds, 226 fixed starts, GPU scale), quoted for comparison."""
 
@@ -49,14 +61,36 @@ def shared_sets(args: argparse.Namespace) -> tuple[str, ...]:
 
 
 def trials(args: argparse.Namespace) -> list[Trial]:
-    return [Trial(ROBOT, args.motion, seed, arm, shared_sets(args) + STUDIES["residual"][arm])
-            for seed in args.seeds for arm in args.arms]
+    return [
+        Trial(ROBOT, args.motion, seed, arm, shared_sets(args) + STUDIES["residual"][arm])
+        for seed in args.seeds
+        for arm in args.arms
+    ]
 
 
 def run(trial: Trial, args: argparse.Namespace) -> bool:
-    command = [sys.executable, "-m", "rd_pipeline", "ablate", "residual", "--robots", ROBOT,
-               "--motions", trial.motion, "--seeds", str(trial.seed), "--arms", trial.variant,
-               "--profile", args.profile, "--workers", "1", "--resume", "--set", *shared_sets(args)]
+    command = [
+        sys.executable,
+        "-m",
+        "rd_pipeline",
+        "ablate",
+        "residual",
+        "--robots",
+        ROBOT,
+        "--motions",
+        trial.motion,
+        "--seeds",
+        str(trial.seed),
+        "--arms",
+        trial.variant,
+        "--profile",
+        args.profile,
+        "--workers",
+        "1",
+        "--resume",
+        "--set",
+        *shared_sets(args),
+    ]
     print(f"{trial.label}: running", flush=True)
     return subprocess.run(command, check=False).returncode == 0
 
@@ -121,11 +155,15 @@ def markdown(result: dict) -> str:
     lines = [
         "# Residual study at CPU scale (the paper's Table r5 and learning-curve figure)",
         "",
-        (f"{result['robot']}, {result['clip']}, `{result['profile']}` profile, "
-        f"{result['samples_per_trial']} samples per trial. Written by `bench/residual_study.py`."),
+        (
+            f"{result['robot']}, {result['clip']}, `{result['profile']}` profile, "
+            f"{result['samples_per_trial']} samples per trial. Written by `bench/residual_study.py`."
+        ),
         "",
-        ("Mean ± 95 % Student-t half-width over seeds. start_zero_s: one deterministic rollout from frame 0; "
-        "the other columns: the fixed grid of starts (one per second), nominal physics, full mesh model."),
+        (
+            "Mean ± 95 % Student-t half-width over seeds. start_zero_s: one deterministic rollout from frame 0; "
+            "the other columns: the fixed grid of starts (one per second), nominal physics, full mesh model."
+        ),
         "",
         "| " + " | ".join(header) + " |",
         "|" + "---|" * len(header),
@@ -134,18 +172,31 @@ def markdown(result: dict) -> str:
         table = arm["table"]
         cells = [_cell(table[m]) for m in (*VALIDATION, "wall_min")]
         lines.append(f"| {arm['arm']} | {len(arm['seeds'])} | " + " | ".join(cells) + " |")
-    lines += ["", "Per seed:", "", "| arm | seed | " + " | ".join(VALIDATION) + " | train min |",
-              "|" + "---|" * (len(VALIDATION) + 3)]
+    lines += [
+        "",
+        "Per seed:",
+        "",
+        "| arm | seed | " + " | ".join(VALIDATION) + " | train min |",
+        "|" + "---|" * (len(VALIDATION) + 3),
+    ]
     for arm in result["arms"]:
         for s in arm["seeds"]:
             values = " | ".join(f"{s[m]}" for m in (*VALIDATION, "wall_min"))
             lines.append(f"| {arm['arm']} | {s['seed']} | {values} |")
-    lines += ["", ("The paper's Table r5 (dance2_subject4, GPU scale; survival in s, errors in mm/mrad), for "
-              "orientation only: a different motion and budget."), "",
-              "| arm | completion % | survival s | MPBPE | MPJPE |", "|---|---|---|---|---|"]
+    lines += [
+        "",
+        (
+            "The paper's Table r5 (dance2_subject4, GPU scale; survival in s, errors in mm/mrad), for "
+            "orientation only: a different motion and budget."
+        ),
+        "",
+        "| arm | completion % | survival s | MPBPE | MPJPE |",
+        "|---|---|---|---|---|",
+    ]
     for arm, row in PAPER_TABLE_R5.items():
-        lines.append(f"| {arm} | {row['completion_pct']} | {row['mean_survival_s']} | {row['E_mpbpe']} | "
-                     f"{row['E_mpjpe']} |")
+        lines.append(
+            f"| {arm} | {row['completion_pct']} | {row['mean_survival_s']} | {row['E_mpbpe']} | {row['E_mpjpe']} |"
+        )
     return "\n".join(lines) + "\n"
 
 

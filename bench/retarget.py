@@ -37,20 +37,42 @@ from rd_pipeline.retarget.retarget import retarget
 from rd_pipeline.robots import load_robot
 
 TAKES = [
-    "dance1_subject1", "dance1_subject2", "dance1_subject3", "fallAndGetUp1_subject1", "fallAndGetUp3_subject1",
-    "ground2_subject2", "multipleActions1_subject1", "obstacles1_subject1", "pushAndFall1_subject1",
+    "dance1_subject1",
+    "dance1_subject2",
+    "dance1_subject3",
+    "fallAndGetUp1_subject1",
+    "fallAndGetUp3_subject1",
+    "ground2_subject2",
+    "multipleActions1_subject1",
+    "obstacles1_subject1",
+    "pushAndFall1_subject1",
 ]
 COLUMNS = {
-    "fps_frames_per_s": "fps", "penetration_max_mm": "pen max", "penetration_p95_mm": "pen p95",
-    "pelvis_height_dev_p95_m": "pelvis dev p95", "skate_stance_mean_mm_s": "skate",
-    "joint_limit_violations": "jl", "velocity_limit_violations": "vel", "self_collision_frames": "self-coll",
-    "jerk_mean": "jerk", "keypoint_error_mean_mm": "kp mean", "keypoint_error_p95_mm": "kp p95",
-    "keypoint_error_max_mm": "kp max", "diverged_frames": "diverged", "root_speed_p999_m_s": "root p99.9",
-    "human_root_speed_p999_m_s": "human p99.9", "pelvis_off_target_pct": "pelvis >0.2 m off %",
+    "fps_frames_per_s": "fps",
+    "penetration_max_mm": "pen max",
+    "penetration_p95_mm": "pen p95",
+    "pelvis_height_dev_p95_m": "pelvis dev p95",
+    "skate_stance_mean_mm_s": "skate",
+    "joint_limit_violations": "jl",
+    "velocity_limit_violations": "vel",
+    "self_collision_frames": "self-coll",
+    "jerk_mean": "jerk",
+    "keypoint_error_mean_mm": "kp mean",
+    "keypoint_error_p95_mm": "kp p95",
+    "keypoint_error_max_mm": "kp max",
+    "diverged_frames": "diverged",
+    "root_speed_p999_m_s": "root p99.9",
+    "human_root_speed_p999_m_s": "human p99.9",
+    "pelvis_off_target_pct": "pelvis >0.2 m off %",
 }
 BARS = {
-    "penetration_max_mm": 10.0, "pelvis_height_dev_p95_m": 0.10, "skate_stance_mean_mm_s": 20.0,
-    "joint_limit_violations": 0, "velocity_limit_violations": 0, "self_collision_frames": 0, "diverged_frames": 0,
+    "penetration_max_mm": 10.0,
+    "pelvis_height_dev_p95_m": 0.10,
+    "skate_stance_mean_mm_s": 20.0,
+    "joint_limit_violations": 0,
+    "velocity_limit_violations": 0,
+    "self_collision_frames": 0,
+    "diverged_frames": 0,
 }
 """The issue's bars, each an upper bound."""
 
@@ -104,25 +126,36 @@ def _retarget_and_score(robot_name: str, motion: str) -> dict:
     human = human_motion_from_bvh(read_bvh(paths.bvh_path(motion)), LAFAN_CM_TO_M, LAFAN_TO_Z_UP)
     robot = load_robot(robot_name)
     began = time.perf_counter()
-    result = retarget(human, robot, params.fps, params.contact, params.shape, params.body_contact, params.weights,
-                      params.ik)
+    result = retarget(
+        human, robot, params.fps, params.contact, params.shape, params.body_contact, params.weights, params.ik
+    )
     seconds = time.perf_counter() - began
     targets = result.targets
     ours = retarget_quality(
-        robot, result.reference, keypoint_targets=targets.positions, keypoint_bodies=targets.bodies,
-        frames_per_s=result.reference.n_frames / seconds, human_pelvis=targets.human_pelvis,
+        robot,
+        result.reference,
+        keypoint_targets=targets.positions,
+        keypoint_bodies=targets.bodies,
+        frames_per_s=result.reference.n_frames / seconds,
+        human_pelvis=targets.human_pelvis,
     )
     root = targets.bodies.index(robot.config.root_body)
     off_target = np.linalg.norm(
         result.reference.body_pos_w[:, result.reference.body_names.index(robot.config.root_body)]
-        - targets.positions[:, root], axis=1,
+        - targets.positions[:, root],
+        axis=1,
     )
     ours["pelvis_off_target_pct"] = round(100.0 * float(np.mean(off_target > 0.2)), 2)
     row = {"robot": robot_name, "motion": motion, "seconds": round(seconds, 2), "ours": ours, "dataset": None}
     csv = paths.csv_path(robot_name, motion)
     if csv is not None and csv.exists():
         dataset = import_retargeted_csv(
-            csv, robot, import_params.source_fps, import_params.fps, import_params.interpolation, import_params.contact,
+            csv,
+            robot,
+            import_params.source_fps,
+            import_params.fps,
+            import_params.interpolation,
+            import_params.contact,
         ).reference
         n_frames = min(dataset.n_frames, targets.n_frames)
         dataset = dataset.frames(0, n_frames)
@@ -131,7 +164,10 @@ def _retarget_and_score(robot_name: str, motion: str) -> dict:
         aligned = _aligned(dataset, targets.positions[:n_frames], targets.bodies)
         pelvis = aligned(targets.human_pelvis[:n_frames, None])[:, 0]
         row["dataset"] = retarget_quality(
-            robot, dataset, keypoint_targets=aligned(targets.positions[:n_frames]), keypoint_bodies=targets.bodies,
+            robot,
+            dataset,
+            keypoint_targets=aligned(targets.positions[:n_frames]),
+            keypoint_bodies=targets.bodies,
             human_pelvis=pelvis,
         )
     return row

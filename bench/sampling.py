@@ -51,7 +51,10 @@ def main() -> None:
     sampler = SegmentSampler(SamplerConfig(), torch.as_tensor(prior.weights), seed=0)
     for _ in range(200):  # 200 updates x 100 steps = 20K steps, 64 episode ends per update
         segments = sampler.sample(64)
-        failed = torch.rand(64, generator=sampler.generator, dtype=torch.float64) < torch.as_tensor(fail_probability)[segments]
+        failed = (
+            torch.rand(64, generator=sampler.generator, dtype=torch.float64)
+            < torch.as_tensor(fail_probability)[segments]
+        )
         sampler.record(segments, failed)
         sampler.advance(100)
     probability = sampler.probabilities().numpy()
@@ -65,7 +68,9 @@ def main() -> None:
         "segments_with_weight": int((prior.weights > 1e-6).sum()),
         "profile_plot": str(plot),
         "max_probability_over_uniform": round(float(probability.max() * 500), 3),
-        "correlation_failure_rate_vs_probability": round(float(np.corrcoef(sampler.failure_rate.numpy(), probability)[0, 1]), 3),
+        "correlation_failure_rate_vs_probability": round(
+            float(np.corrcoef(sampler.failure_rate.numpy(), probability)[0, 1]), 3
+        ),
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")

@@ -175,10 +175,19 @@ class Ablate(Sweep):
 def main(argv: list[str] | None = None) -> int:
     command = tyro.extras.subcommand_cli_from_dict(
         {
-            "run": Run, "stage": StageCommand, "status": Status, "view": View,
-            "fetch-lafan": FetchLafan, "robots": Robots, "motions": Motions, "sweep": Sweep, "ablate": Ablate,
+            "run": Run,
+            "stage": StageCommand,
+            "status": Status,
+            "view": View,
+            "fetch-lafan": FetchLafan,
+            "robots": Robots,
+            "motions": Motions,
+            "sweep": Sweep,
+            "ablate": Ablate,
         },
-        prog="rd-pipeline", args=argv, description="LAFAN1 mocap -> humanoid dance policies, one DAG per (robot, motion).",
+        prog="rd-pipeline",
+        args=argv,
+        description="LAFAN1 mocap -> humanoid dance policies, one DAG per (robot, motion).",
     )
     console = Console(stderr=True, soft_wrap=True)
     try:
@@ -198,9 +207,15 @@ def _dispatch(command: object, console: Console) -> int:
     from rd_pipeline import commands
 
     handlers = {
-        Run: commands.run, StageCommand: commands.stage, Status: commands.status, View: commands.view,
-        FetchLafan: commands.fetch_lafan, Robots: commands.robots, Motions: commands.motions,
-        Sweep: commands.sweep, Ablate: commands.ablate,
+        Run: commands.run,
+        StageCommand: commands.stage,
+        Status: commands.status,
+        View: commands.view,
+        FetchLafan: commands.fetch_lafan,
+        Robots: commands.robots,
+        Motions: commands.motions,
+        Sweep: commands.sweep,
+        Ablate: commands.ablate,
     }
     return handlers[type(command)](command, console)
 

@@ -47,13 +47,24 @@ def _pipeline(robot, motion, profile, source, params_file, assignments, seed=Non
 
 
 def run(cmd: Run, console: Console) -> int:
-    assignments = cmd.set + ((f"train.clip={cmd.clip}",) if cmd.clip else ()) + (
-        (f"train.env.backend={cmd.backend}",) if cmd.backend else ())
+    assignments = (
+        cmd.set
+        + ((f"train.clip={cmd.clip}",) if cmd.clip else ())
+        + ((f"train.env.backend={cmd.backend}",) if cmd.backend else ())
+    )
     pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, cmd.source, cmd.params_file, assignments, cmd.seed)
     store = ArtifactStore(paths.artifacts_dir())
     console.print(f"rd-pipeline: {cmd.robot}/{cmd.motion} from {pipeline.source}, artifacts in {store.root}")
-    outcomes = execute(pipeline, store, start=cmd.from_, until=cmd.until, only=cmd.only, force=cmd.force,
-                       console=console, resume=cmd.resume)
+    outcomes = execute(
+        pipeline,
+        store,
+        start=cmd.from_,
+        until=cmd.until,
+        only=cmd.only,
+        force=cmd.force,
+        console=console,
+        resume=cmd.resume,
+    )
     print_summary(pipeline, outcomes, console)
     return 0
 
@@ -85,8 +96,14 @@ def stage(cmd: StageCommand, console: Console) -> int:
         raise PipelineError(f"unknown stage '{cmd.name}' (stages: {', '.join(by_name)})")
     chosen = by_name[cmd.name]
     pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, chosen.source, cmd.params_file, cmd.set, cmd.seed)
-    execute(pipeline, ArtifactStore(paths.artifacts_dir()), only=cmd.name, force=cmd.force, console=console,
-            resume=cmd.resume)
+    execute(
+        pipeline,
+        ArtifactStore(paths.artifacts_dir()),
+        only=cmd.name,
+        force=cmd.force,
+        console=console,
+        resume=cmd.resume,
+    )
     return 0
 
 
@@ -101,8 +118,14 @@ def status(cmd: Status, console: Console) -> int:
         pipeline = _pipeline(robot, motion, cmd.profile, cmd.source, cmd.params_file, cmd.set)
         if robot is None:  # a motion with only robot-independent artifacts so far
             pipeline = dataclasses.replace(pipeline, registry=tuple(s for s in pipeline.registry if not s.per_robot))
-        reports.append({"robot": robot, "motion": motion, "source": pipeline.source,
-                        "stages": stage_status(pipeline, store, cmd.verify)})
+        reports.append(
+            {
+                "robot": robot,
+                "motion": motion,
+                "source": pipeline.source,
+                "stages": stage_status(pipeline, store, cmd.verify),
+            }
+        )
     if cmd.json:
         print(json.dumps({"artifacts": str(store.root), "pipelines": reports}, indent=2))
         return 0
@@ -117,7 +140,9 @@ def status(cmd: Status, console: Console) -> int:
             state = f"[{colors[row['state']]}]{row['state']}[/]"
             where = row["path"] or ""
             reason = row.get("reason")
-            table.add_row(row["stage"], state, row["key"] or "-", f"{where} ({reason})" if where and reason else reason or where)
+            table.add_row(
+                row["stage"], state, row["key"] or "-", f"{where} ({reason})" if where and reason else reason or where
+            )
         out = Console()
         if not out.is_terminal:  # piped or logged: whole paths, not a table folded at 80 columns
             out.width = 1000
@@ -152,7 +177,9 @@ def view(cmd: View, console: Console) -> int:
     artifacts = {o.name: o.path for o in outcomes}
     # The tracked robot is shown when this configuration has been validated; view never trains.
     planned = {entry.stage.name: entry for entry in pipeline.plan(pipeline.chain())}
-    validated = store.find("validate", cmd.robot, cmd.motion, planned["validate"].key) if "validate" in planned else None
+    validated = (
+        store.find("validate", cmd.robot, cmd.motion, planned["validate"].key) if "validate" in planned else None
+    )
     tracked = validated.path / TRACKED_FILE if validated else None
     out = cmd.out
     if out is None and not display_available():
@@ -179,23 +206,29 @@ def robots(cmd: Robots, console: Console) -> int:
 
     for name in available_robots():
         config = load_robot_config(name)
-        print(f"{name:<6} {len(config.joint_names):>2} joints, {len(config.policy_joints):>2} policy  {config.description}")
+        print(
+            f"{name:<6} {len(config.joint_names):>2} joints, {len(config.policy_joints):>2} policy  {config.description}"
+        )
     return 0
 
 
 def motions(cmd: Motions, console: Console) -> int:
     found = paths.available_motions()
     if not found:
-        raise PipelineError(
-            f"no motions: {paths.lafan_dir()} has no BVH and RD_RETARGETED_DIR is not set or empty"
-        )
+        raise PipelineError(f"no motions: {paths.lafan_dir()} has no BVH and RD_RETARGETED_DIR is not set or empty")
     for name, sources in found.items():
         print(f"{name:<18} {' '.join(sources)}")
     return 0
 
 
-SWEEP_COLUMNS = ("start_zero_survival_s", "zero_action_start_zero_survival_s", "mean_survival_s", "completion_pct",
-                 "E_g_mpbpe", "E_mpjpe")
+SWEEP_COLUMNS = (
+    "start_zero_survival_s",
+    "zero_action_start_zero_survival_s",
+    "mean_survival_s",
+    "completion_pct",
+    "E_g_mpbpe",
+    "E_mpjpe",
+)
 """Summary-table columns, from each trial's validate manifest."""
 
 
@@ -230,15 +263,21 @@ def _run_trials(cmd: Sweep, trials, label: str, console: Console):
     # The same trials and profile always land in the same folder.
     described = {"trials": [t.label for t in trials], "sets": [t.assignments for t in trials], "profile": cmd.profile}
     name = f"{label}-{artifact_key('sweep', 1, described, {}, {})[:8]}"
-    console.print(f"{label}: {len(trials)} trials ({cmd.executor}), results in {paths.artifacts_dir() / 'sweeps' / name}")
-    results = run_sweep(trials, cmd.profile, cmd.executor, cmd.workers, cmd.ray_address, find_report, on_result,
-                        resume=cmd.resume)
+    console.print(
+        f"{label}: {len(trials)} trials ({cmd.executor}), results in {paths.artifacts_dir() / 'sweeps' / name}"
+    )
+    results = run_sweep(
+        trials, cmd.profile, cmd.executor, cmd.workers, cmd.ray_address, find_report, on_result, resume=cmd.resume
+    )
     out = paths.artifacts_dir() / "sweeps" / name
     summary = write_summary(results, out, SWEEP_COLUMNS)
     table = Table("trial", "status", *SWEEP_COLUMNS, title=f"{label} summary")
     for r in results:
-        table.add_row(r.trial.label, "ok" if r.ok else "failed",
-                      *("–" if r.metrics.get(c) is None else f"{r.metrics[c]:.2f}" for c in SWEEP_COLUMNS))
+        table.add_row(
+            r.trial.label,
+            "ok" if r.ok else "failed",
+            *("–" if r.metrics.get(c) is None else f"{r.metrics[c]:.2f}" for c in SWEEP_COLUMNS),
+        )
     console.print(table)
     console.print(f"wrote {summary}")
     return results, out

@@ -65,7 +65,11 @@ def layered_params(
     profile: str | None, stage_names: list[str], params_file: Path | None, assignments: tuple[str, ...]
 ) -> dict[str, dict[str, Any]]:
     file_profile, file_values = read_params_file(params_file, stage_names) if params_file else (None, {})
-    layers = [load_profile(profile or file_profile or DEFAULT_PROFILE), file_values, parse_assignments(assignments, stage_names)]
+    layers = [
+        load_profile(profile or file_profile or DEFAULT_PROFILE),
+        file_values,
+        parse_assignments(assignments, stage_names),
+    ]
     merged: dict[str, dict[str, Any]] = {}
     for layer in layers:
         for stage, values in layer.items():

@@ -4,8 +4,16 @@ from rd_pipeline.stages import export, import_motion, parse, prior, retarget, st
 
 from rd_pipeline.artifacts.stage import Stage
 
-REGISTRY: tuple[Stage, ...] = (parse.STAGE, retarget.STAGE, import_motion.STAGE, stats.STAGE, prior.STAGE, train.STAGE,
-                               export.STAGE, validate.STAGE)
+REGISTRY: tuple[Stage, ...] = (
+    parse.STAGE,
+    retarget.STAGE,
+    import_motion.STAGE,
+    stats.STAGE,
+    prior.STAGE,
+    train.STAGE,
+    export.STAGE,
+    validate.STAGE,
+)
 
 
 def stage_names() -> list[str]:

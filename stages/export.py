@@ -37,22 +37,34 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     if iteration not in checkpoints:
         raise PipelineError(f"export.checkpoint {iteration}: no such checkpoint (have {sorted(checkpoints)})")
     metrics, params = manifest["metrics"], manifest["params"]
-    actor = load_actor(checkpoints[iteration], metrics["observation_size"], metrics["num_actions"],
-                       list(params["ppo"]["hidden_dims"]))
+    actor = load_actor(
+        checkpoints[iteration], metrics["observation_size"], metrics["num_actions"], list(params["ppo"]["hidden_dims"])
+    )
     scripted = script_actor(actor)
     scripted.save(str(ctx.out_dir / POLICY_FILE))
     reference_stage = next(s for s in REFERENCE_STAGES if s in manifest["upstream"])
-    spec = build_policy_spec(load_robot(ctx.robot), params["env"], metrics["num_actions"], reference_stage,
-                             manifest["upstream"][reference_stage], tuple(metrics["clip_frames"]))
+    spec = build_policy_spec(
+        load_robot(ctx.robot),
+        params["env"],
+        metrics["num_actions"],
+        reference_stage,
+        manifest["upstream"][reference_stage],
+        tuple(metrics["clip_frames"]),
+    )
     spec.save(ctx.out_dir / SPEC_FILE)
     load_policy_spec(ctx.out_dir / SPEC_FILE)  # what we wrote must pass the deploy-side check
     probe = torch.zeros(1, metrics["observation_size"])
     with torch.inference_mode():
         expected = actor(TensorDict({"policy": probe}, batch_size=[1]), stochastic_output=False)
         gap = float((scripted(probe) - expected).abs().max())
-    return {"checkpoint_iteration": iteration, "observation_size": metrics["observation_size"],
-            "num_actions": metrics["num_actions"], "action_mode": spec.get("action.mode"),
-            "reference_key": spec.get("reference.key"), "max_abs_diff_on_zero_observation": gap}
+    return {
+        "checkpoint_iteration": iteration,
+        "observation_size": metrics["observation_size"],
+        "num_actions": metrics["num_actions"],
+        "action_mode": spec.get("action.mode"),
+        "reference_key": spec.get("reference.key"),
+        "max_abs_diff_on_zero_observation": gap,
+    }
 
 
 STAGE = Stage(

@@ -27,9 +27,16 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
     stats = SegmentStats.load(ctx.upstream["segment_stats"].path / SEGMENTS_FILE)
     prior = solve_balanced_prior(stats.histograms, stats.lengths, ctx.params.solver)
-    np.savez(ctx.out_dir / PRIOR_FILE, weights=prior.weights, time_weights=prior.time_weights,
-             marginal_before=prior.marginal_before, marginal_after=prior.marginal_after,
-             starts=stats.starts, lengths=stats.lengths, fps=stats.fps)
+    np.savez(
+        ctx.out_dir / PRIOR_FILE,
+        weights=prior.weights,
+        time_weights=prior.time_weights,
+        marginal_before=prior.marginal_before,
+        marginal_after=prior.marginal_after,
+        starts=stats.starts,
+        lengths=stats.lengths,
+        fps=stats.fps,
+    )
     plot_balancing(stats, prior, ctx.out_dir / PLOT_FILE)
     support = stats.histograms.sum(axis=0) > 0
     before, after = flatness(prior.marginal_before, support), flatness(prior.marginal_after, support)

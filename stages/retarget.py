@@ -54,8 +54,17 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     robot = load_robot(ctx.robot)
     human = HumanMotion.load(ctx.upstream["human_motion"].path / HUMAN_MOTION_FILE)
     began = time.perf_counter()
-    result = retarget(human, robot, p.fps, p.contact, p.shape, p.body_contact, p.weights, p.ik,
-                      track=lambda frames, total: ctx.track(frames, total, f"IK {ctx.robot}"))
+    result = retarget(
+        human,
+        robot,
+        p.fps,
+        p.contact,
+        p.shape,
+        p.body_contact,
+        p.weights,
+        p.ik,
+        track=lambda frames, total: ctx.track(frames, total, f"IK {ctx.robot}"),
+    )
     seconds = time.perf_counter() - began
     reference, targets = result.reference, result.targets
     reference.save(ctx.out_dir / REFERENCE_FILE)

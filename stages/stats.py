@@ -38,8 +38,9 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     reference = ReferenceMotion.load(ctx.upstream["reference"].path / REFERENCE_FILE)
     mask = tuple(config.policy_joints[i] for i in config.residual_indices)
     limits = robot.joint_range[[config.joint_names.index(j) for j in mask]]
-    stats = segment_statistics(reference.joint_pos, reference.joint_names, reference.fps, mask, limits,
-                               p.segment_s, p.min_last_s, p.bins)
+    stats = segment_statistics(
+        reference.joint_pos, reference.joint_names, reference.fps, mask, limits, p.segment_s, p.min_last_s, p.bins
+    )
     stats.save(ctx.out_dir / SEGMENTS_FILE)
     plot_segment_statistics(stats, reference.joint_pos, tuple(leg_joints(robot)), ctx.out_dir / PLOT_FILE)
     ranking = std_ranking(stats, config.policy_joints, mask)
@@ -61,8 +62,10 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         f" ({'agrees with' if leg_ranking['agrees'] else 'differs from'} the top {len(mask)} leg joints by std)"
     )
     return {k: v for k, v in summary.items() if not k.startswith("std_ranking")} | {
-        "mask_ranks_by_std": ranking["mask_ranks"], "mask_ranks_by_std_legs": leg_ranking["mask_ranks"],
-        "mask_agrees_with_std_legs": leg_ranking["agrees"], "top_std_joints": ranking["top_k_by_std"],
+        "mask_ranks_by_std": ranking["mask_ranks"],
+        "mask_ranks_by_std_legs": leg_ranking["mask_ranks"],
+        "mask_agrees_with_std_legs": leg_ranking["agrees"],
+        "top_std_joints": ranking["top_k_by_std"],
     }
 
 

@@ -57,7 +57,9 @@ def clip_frames(clip: str, fps: float, n_frames: int, warn: Callable[[str], None
     start = round((start_s or 0.0) * fps)
     end = n_frames if end_s is None else round(end_s * fps)
     if end > n_frames:
-        warn(f"train.clip '{clip}' ends after the {n_frames / fps:.2f} s motion: training on {start / fps:g}:{n_frames / fps:.2f}")
+        warn(
+            f"train.clip '{clip}' ends after the {n_frames / fps:.2f} s motion: training on {start / fps:g}:{n_frames / fps:.2f}"
+        )
         end = n_frames
     if not 0 <= start < end - fps * MIN_MOTION_S:
         raise PipelineError(
@@ -108,8 +110,17 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         shutil.rmtree(work)
     work.mkdir(parents=True, exist_ok=True)
     with ctx.progress(p.iterations - start_iteration, f"PPO {ctx.robot}") as advance:
-        train(env, ppo, p.iterations, work, p.checkpoint_every, start_iteration=start_iteration,
-              on_iteration=lambda row: advance(f"reward {row['reward']:.2f}  episode {row['episode_length_s'] or 0:.2f} s"))
+        train(
+            env,
+            ppo,
+            p.iterations,
+            work,
+            p.checkpoint_every,
+            start_iteration=start_iteration,
+            on_iteration=lambda row: advance(
+                f"reward {row['reward']:.2f}  episode {row['episode_length_s'] or 0:.2f} s"
+            ),
+        )
     env.close()
     rows = [json.loads(line) for line in (work / LOG_FILE).read_text().splitlines()]
     if work != ctx.out_dir:
@@ -117,13 +128,21 @@ def _run(ctx: StageContext) -> dict[str, Any]:
             shutil.move(str(item), ctx.out_dir / item.name)
         work.rmdir()
     plot_learning_curve(rows, ctx.out_dir / CURVE_FILE)
-    plot_sampler_profile(sampler.failure_rate.numpy(), sampler.probabilities().numpy(), 1 / sampler.n_segments,
-                         ctx.out_dir / PROFILE_FILE)
+    plot_sampler_profile(
+        sampler.failure_rate.numpy(),
+        sampler.probabilities().numpy(),
+        1 / sampler.n_segments,
+        ctx.out_dir / PROFILE_FILE,
+    )
     last = rows[-1]
     return {
-        "iterations": p.iterations, "num_envs": p.env.num_envs, "clip_frames": [start, end],
-        "observation_size": observation_size, "num_actions": env.num_actions,
-        "final_episode_length_s": last["episode_length_s"], "final_reward": last["reward"],
+        "iterations": p.iterations,
+        "num_envs": p.env.num_envs,
+        "clip_frames": [start, end],
+        "observation_size": observation_size,
+        "num_actions": env.num_actions,
+        "final_episode_length_s": last["episode_length_s"],
+        "final_reward": last["reward"],
         "samples_per_s_median": float(np.median([r["samples_per_s"] for r in rows])),
         "sampler_step": sampler.step,
     }

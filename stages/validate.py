@@ -44,13 +44,21 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     exported, reference_ref = ctx.upstream["deployable_policy"], ctx.upstream["reference"]
     spec = load_policy_spec(exported.path / SPEC_FILE)
     if spec.get("reference.key") != reference_ref.key:
-        raise PipelineError(f"{exported.path / SPEC_FILE}: the policy was trained on reference {spec.get('reference.key')}, "
-                            f"not {reference_ref.key}")
+        raise PipelineError(
+            f"{exported.path / SPEC_FILE}: the policy was trained on reference {spec.get('reference.key')}, "
+            f"not {reference_ref.key}"
+        )
     start, end = spec.get("reference.start_frame"), spec.get("reference.end_frame")
     reference = ReferenceMotion.load(reference_ref.path / REFERENCE_FILE).frames(start, end)
     joints = spec.get("joints")
-    model = pd_simulation_model(asset_path(spec.get("mjcf")), joints["actuated"], np.array(joints["kp"]),
-                                np.array(joints["kd"]), np.array(joints["effort_limit"]), 1.0 / spec.get("rates.physics_hz"))
+    model = pd_simulation_model(
+        asset_path(spec.get("mjcf")),
+        joints["actuated"],
+        np.array(joints["kp"]),
+        np.array(joints["kd"]),
+        np.array(joints["effort_limit"]),
+        1.0 / spec.get("rates.physics_hz"),
+    )
     scripted = torch.jit.load(str(exported.path / POLICY_FILE))
     torch.set_num_threads(1)  # a small MLP on a few hundred rows; the physics threads want the cores
 
@@ -70,10 +78,14 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     nominal, per_start, first = {}, {}, {}
     with ctx.progress(len(CONTROLLERS) * (1 + len(p.randomized_seeds)), "sim2sim rollouts") as advance:
         for name in CONTROLLERS:
-            rollouts = run_rollouts(specs[name], [model] * len(starts), reference, controllers[name], starts, bodies,
-                                    p.protocol)
-            nominal[name] = {"fixed_grid": summarize(rollouts, control_hz), "start_zero": summarize(rollouts[:1], control_hz),
-                             "drift": drift(rollouts, rng)}
+            rollouts = run_rollouts(
+                specs[name], [model] * len(starts), reference, controllers[name], starts, bodies, p.protocol
+            )
+            nominal[name] = {
+                "fixed_grid": summarize(rollouts, control_hz),
+                "start_zero": summarize(rollouts[:1], control_hz),
+                "drift": drift(rollouts, rng),
+            }
             per_start[name] = [(r.start_frame / control_hz, r.steps / control_hz) for r in rollouts]
             first[name] = rollouts[0]
             advance(name)
@@ -83,36 +95,65 @@ def _run(ctx: StageContext) -> dict[str, Any]:
             for seed in p.randomized_seeds:
                 models = randomized_models(model, len(starts), np.random.default_rng(seed))
                 for name in CONTROLLERS:
-                    rollouts = run_rollouts(specs[name], models, reference, controllers[name], starts, bodies, p.protocol)
+                    rollouts = run_rollouts(
+                        specs[name], models, reference, controllers[name], starts, bodies, p.protocol
+                    )
                     per_seed[name].append(summarize(rollouts, control_hz))
                     advance(f"{name} seed {seed}")
-            randomized = {"seeds": list(p.randomized_seeds), **{
-                name: {m: t_interval([s[m] for s in per_seed[name]])
-                       for m in ("completion_pct", "mean_survival_s", "E_g_mpbpe", "E_mpjpe")} for name in CONTROLLERS}}
+            randomized = {
+                "seeds": list(p.randomized_seeds),
+                **{
+                    name: {
+                        m: t_interval([s[m] for s in per_seed[name]])
+                        for m in ("completion_pct", "mean_survival_s", "E_g_mpbpe", "E_mpjpe")
+                    }
+                    for name in CONTROLLERS
+                },
+            }
 
     report = {
-        "robot": ctx.robot, "motion": ctx.motion, "policy_key": exported.key,
-        "reference": {"stage": reference_ref.stage, "key": reference_ref.key, "start_frame": start, "end_frame": end,
-                      "duration_s": reference.duration_s},
-        "rates": spec.get("rates"), "protocol": {"grid_s": p.protocol.grid_s, "starts": len(starts),
-                                                 "motion_far_m": p.protocol.motion_far_m,
-                                                 "orientation_limit_rad": p.protocol.orientation_limit_rad},
-        "nominal": nominal, **({"randomized": randomized} if randomized else {}),
+        "robot": ctx.robot,
+        "motion": ctx.motion,
+        "policy_key": exported.key,
+        "reference": {
+            "stage": reference_ref.stage,
+            "key": reference_ref.key,
+            "start_frame": start,
+            "end_frame": end,
+            "duration_s": reference.duration_s,
+        },
+        "rates": spec.get("rates"),
+        "protocol": {
+            "grid_s": p.protocol.grid_s,
+            "starts": len(starts),
+            "motion_far_m": p.protocol.motion_far_m,
+            "orientation_limit_rad": p.protocol.orientation_limit_rad,
+        },
+        "nominal": nominal,
+        **({"randomized": randomized} if randomized else {}),
     }
     write_json(report, ctx.out_dir)
     write_markdown(report, ctx.out_dir)
     plot_report(report, per_start, ctx.out_dir)
     tracked = first["policy"]
     save_tracked(ctx.out_dir / TRACKED_FILE, tracked.body_pos, tracked.body_quat, start, reference.fps)
-    record_tracking(load_robot(ctx.robot).model, reference, ctx.out_dir / TRACKED_FILE,
-                    f"{ctx.robot}_{ctx.motion}_sim2sim", ctx.out_dir / RECORDING_FILE, first_frame=start)
+    record_tracking(
+        load_robot(ctx.robot).model,
+        reference,
+        ctx.out_dir / TRACKED_FILE,
+        f"{ctx.robot}_{ctx.motion}_sim2sim",
+        ctx.out_dir / RECORDING_FILE,
+        first_frame=start,
+    )
     zero, pol = nominal["zero_action"], nominal["policy"]
     return {
         "start_zero_survival_s": pol["start_zero"]["mean_survival_s"],
         "zero_action_start_zero_survival_s": zero["start_zero"]["mean_survival_s"],
-        "completion_pct": pol["fixed_grid"]["completion_pct"], "mean_survival_s": pol["fixed_grid"]["mean_survival_s"],
+        "completion_pct": pol["fixed_grid"]["completion_pct"],
+        "mean_survival_s": pol["fixed_grid"]["mean_survival_s"],
         "zero_action_mean_survival_s": zero["fixed_grid"]["mean_survival_s"],
-        "E_g_mpbpe": pol["fixed_grid"]["E_g_mpbpe"], "E_mpjpe": pol["fixed_grid"]["E_mpjpe"],
+        "E_g_mpbpe": pol["fixed_grid"]["E_g_mpbpe"],
+        "E_mpjpe": pol["fixed_grid"]["E_mpjpe"],
     }
 
 

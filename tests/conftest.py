@@ -33,6 +33,10 @@ def artifacts(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 def cli(*args: str, env: dict[str, str] | None = None, cwd: Path | None = None) -> subprocess.CompletedProcess:
     """Run `rd-pipeline` in a subprocess, as a user would."""
     return subprocess.run(
-        [sys.executable, "-m", "rd_pipeline", *args], capture_output=True, text=True,
-        env={**os.environ, **(env or {})}, cwd=cwd or PROJECT, timeout=600,
+        [sys.executable, "-m", "rd_pipeline", *args],
+        capture_output=True,
+        text=True,
+        env={**os.environ, **(env or {})},
+        cwd=cwd or PROJECT,
+        timeout=600,
     )

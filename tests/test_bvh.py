@@ -14,9 +14,28 @@ from rd_pipeline.motion.bvh import forward_kinematics, read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
 
 LAFAN_JOINTS = [
-    "Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToe", "RightUpLeg", "RightLeg", "RightFoot", "RightToe",
-    "Spine", "Spine1", "Spine2", "Neck", "Head", "LeftShoulder", "LeftArm", "LeftForeArm", "LeftHand",
-    "RightShoulder", "RightArm", "RightForeArm", "RightHand",
+    "Hips",
+    "LeftUpLeg",
+    "LeftLeg",
+    "LeftFoot",
+    "LeftToe",
+    "RightUpLeg",
+    "RightLeg",
+    "RightFoot",
+    "RightToe",
+    "Spine",
+    "Spine1",
+    "Spine2",
+    "Neck",
+    "Head",
+    "LeftShoulder",
+    "LeftArm",
+    "LeftForeArm",
+    "LeftHand",
+    "RightShoulder",
+    "RightArm",
+    "RightForeArm",
+    "RightHand",
 ]
 
 
@@ -113,24 +132,40 @@ def _set_value(line_index: int, value: str):
         parts = lines[line_index].split()
         parts[5] = value
         lines[line_index] = " ".join(parts)
+
     return change
 
 
 BAD_INPUTS = {
     # name: (edit of the file's lines, expected 1-based line number, message)
-    "truncated": (lambda lines: lines.__delitem__(slice(3000, None)), 3000,
-                  "truncated: Frames says 3945 but the file has 2866 motion lines"),
-    "short line": (lambda lines: lines.__setitem__(499, " ".join(lines[499].split()[:-1])), 500,
-                   "expected 69 values on a motion line, got 68"),
+    "truncated": (
+        lambda lines: lines.__delitem__(slice(3000, None)),
+        3000,
+        "truncated: Frames says 3945 but the file has 2866 motion lines",
+    ),
+    "short line": (
+        lambda lines: lines.__setitem__(499, " ".join(lines[499].split()[:-1])),
+        500,
+        "expected 69 values on a motion line, got 68",
+    ),
     "non-numeric": (_set_value(699, "abc"), 700, "non-numeric value 'abc'"),
     "nan": (_set_value(799, "nan"), 800, "non-finite value 'nan'"),
     "inf": (_set_value(899, "-inf"), 900, "non-finite value '-inf'"),
-    "zero frame time": (lambda lines: lines.__setitem__(133, "Frame Time: 0"), 134,
-                        "Frame Time must be a positive number, got 0.0"),
-    "negative frame time": (lambda lines: lines.__setitem__(133, "Frame Time: -0.033333"), 134,
-                            "Frame Time must be a positive number, got -0.033333"),
-    "no motion section": (lambda lines: lines.__delitem__(slice(131, None)), 131,
-                          "file ends before the MOTION section"),
+    "zero frame time": (
+        lambda lines: lines.__setitem__(133, "Frame Time: 0"),
+        134,
+        "Frame Time must be a positive number, got 0.0",
+    ),
+    "negative frame time": (
+        lambda lines: lines.__setitem__(133, "Frame Time: -0.033333"),
+        134,
+        "Frame Time must be a positive number, got -0.033333",
+    ),
+    "no motion section": (
+        lambda lines: lines.__delitem__(slice(131, None)),
+        131,
+        "file ends before the MOTION section",
+    ),
 }
 
 
@@ -140,8 +175,16 @@ def test_header_one_frame_over_whole_lines_is_read_with_a_warning(tmp_path: Path
     clip = read_bvh(path)
     assert clip.channels.shape == (5046, 69)
     assert clip.warnings == (f"{path}: Frames says 5047 but the file has 5046 whole motion lines; read 5046",)
-    result = cli("run", "--robot", "g1", "--motion", "fallAndGetUp1_subject1", "--until", "parse",
-                 env={"RD_ARTIFACTS": str(tmp_path / "store")})
+    result = cli(
+        "run",
+        "--robot",
+        "g1",
+        "--motion",
+        "fallAndGetUp1_subject1",
+        "--until",
+        "parse",
+        env={"RD_ARTIFACTS": str(tmp_path / "store")},
+    )
     assert result.returncode == 0, result.stderr
     warnings = [line for line in result.stderr.splitlines() if line.startswith("warning:")]
     (warning,) = warnings  # the CLI names the file by its resolved path
@@ -177,8 +220,16 @@ def test_bad_input_names_file_and_line(case: str, dance: Path, tmp_path: Path) -
 def test_bad_input_through_the_cli_is_one_line_and_leaves_no_artifact(dance: Path, tmp_path: Path) -> None:
     path = _corrupt(dance, tmp_path, _set_value(699, "nan"))
     store = tmp_path / "store"
-    result = cli("run", "--robot", "g1", "--motion", "dance1_subject2", "--until", "parse",
-                 env={"RD_LAFAN_DIR": str(tmp_path), "RD_ARTIFACTS": str(store)})
+    result = cli(
+        "run",
+        "--robot",
+        "g1",
+        "--motion",
+        "dance1_subject2",
+        "--until",
+        "parse",
+        env={"RD_LAFAN_DIR": str(tmp_path), "RD_ARTIFACTS": str(store)},
+    )
     assert result.returncode == 2
     assert "Traceback" not in result.stderr
     error_lines = [line for line in result.stderr.splitlines() if line.startswith("error:")]

@@ -55,13 +55,16 @@ def test_a_choice_outside_its_literal_is_refused_when_params_are_read(artifacts:
     assert not (artifacts / "parse").exists()  # refused before any stage ran
 
 
-@pytest.mark.parametrize(("assignment", "message"), [
-    ("train.iterations=0", "parameter 'train.iterations' must be positive, got 0"),
-    ("train.iterations=-1", "parameter 'train.iterations' must be positive, got -1"),
-    ("train.env.num_envs=0", "parameter 'train.env.num_envs' must be positive, got 0"),
-    ("retarget.fps=-50", "parameter 'retarget.fps' must be positive, got -50.0"),
-    ("train.seed=1.5", "parameter 'train.seed' must be an integer, got '1.5'"),
-])
+@pytest.mark.parametrize(
+    ("assignment", "message"),
+    [
+        ("train.iterations=0", "parameter 'train.iterations' must be positive, got 0"),
+        ("train.iterations=-1", "parameter 'train.iterations' must be positive, got -1"),
+        ("train.env.num_envs=0", "parameter 'train.env.num_envs' must be positive, got 0"),
+        ("retarget.fps=-50", "parameter 'retarget.fps' must be positive, got -50.0"),
+        ("train.seed=1.5", "parameter 'train.seed' must be an integer, got '1.5'"),
+    ],
+)
 def test_out_of_range_params_are_one_line_naming_the_parameter(assignment: str, message: str, artifacts: Path) -> None:
     result = cli("run", "--until", "parse", "--set", assignment)
     assert result.returncode != 0

@@ -32,15 +32,17 @@ from rd_pipeline.sampling.segments import segment_bounds
 
 def _env(robot_name: str, motion: str, config: EnvConfig):
     robot = load_robot(robot_name)
-    reference = import_retargeted_csv(RETARGETED_DIR / robot_name / f"{motion}.csv", robot, 30.0, 50.0, "cubic",
-                                      ContactThresholds()).reference.frames(0, 600)
+    reference = import_retargeted_csv(
+        RETARGETED_DIR / robot_name / f"{motion}.csv", robot, 30.0, 50.0, "cubic", ContactThresholds()
+    ).reference.frames(0, 600)
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
     sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=0)
     return robot, reference, TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=0)
 
 
-@pytest.mark.parametrize(("robot_name", "motion", "mode"), [("g1", "dance1_subject2", "selective"),
-                                                             ("h1_2", "dance2_subject4", "all")])
+@pytest.mark.parametrize(
+    ("robot_name", "motion", "mode"), [("g1", "dance1_subject2", "selective"), ("h1_2", "dance2_subject4", "all")]
+)
 def test_deploy_observations_equal_the_training_environment(robot_name: str, motion: str, mode: str) -> None:
     config = nominal(EnvConfig(), 4)
     config = dataclasses.replace(config, actions=dataclasses.replace(config.actions, mode=mode))
@@ -89,8 +91,7 @@ def test_exported_module_matches_the_training_actor(tmp_path: Path) -> None:
     loaded = torch.jit.load(str(tmp_path / "policy.pt"))
     ppo.actor.eval()
     with torch.inference_mode():
-        expected = ppo.actor(TensorDict({"policy": observations}, batch_size=[1000]),
-                             stochastic_output=False)
+        expected = ppo.actor(TensorDict({"policy": observations}, batch_size=[1000]), stochastic_output=False)
         exported = loaded(observations)
     assert exported.shape == (1000, 23)  # selective: every G1 policy joint has an output
     assert (exported - expected).abs().max().item() <= 1e-5
@@ -147,7 +148,9 @@ def test_smoke_profile_trains_exports_and_validates(robot: str, motion: str, art
     assert "| zero_action |" in (validate / "report.md").read_text()
     if robot == "g1":  # `view` puts the tracked robot beside the human and the reference once validated
         out = artifacts.parent / "view.rrd"
-        assert cli("view", "--robot", robot, "--motion", motion, "--profile", "smoke", "--out", str(out)).returncode == 0
+        assert (
+            cli("view", "--robot", robot, "--motion", motion, "--profile", "smoke", "--out", str(out)).returncode == 0
+        )
         rows: dict[str, int] = {}
         for chunk in RrdReader(str(out)).store().stream():
             if not chunk.is_static:

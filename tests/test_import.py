@@ -89,8 +89,12 @@ def test_contacts_alternate_between_feet(h1_2_dance2) -> None:
 def test_g1_maps_29_dof_dataset_by_name() -> None:
     result = _import("g1", "dance1_subject2")
     assert result.dropped_joints == (
-        "waist_roll_joint", "waist_pitch_joint", "left_wrist_pitch_joint", "left_wrist_yaw_joint",
-        "right_wrist_pitch_joint", "right_wrist_yaw_joint",
+        "waist_roll_joint",
+        "waist_pitch_joint",
+        "left_wrist_pitch_joint",
+        "left_wrist_yaw_joint",
+        "right_wrist_pitch_joint",
+        "right_wrist_yaw_joint",
     )
     table = np.loadtxt(RETARGETED_DIR / "g1" / "dance1_subject2.csv", delimiter=",")
     robot = load_robot("g1")
@@ -109,8 +113,15 @@ def test_bad_csv_lines_are_named(tmp_path: Path) -> None:
     path.write_text("\n".join(source) + "\n")
     with pytest.raises(PipelineError, match=rf"^{path}:42: expected 26 values, got 25$"):
         import_retargeted_csv(path, load_robot("h1"), 30.0, 50.0, "cubic", ContactThresholds())
-    result = cli("stage", "import", "--robot", "h1", "--motion", "dance1_subject1",
-                 env={"RD_RETARGETED_DIR": str(tmp_path), "RD_ARTIFACTS": str(tmp_path / "store")})
+    result = cli(
+        "stage",
+        "import",
+        "--robot",
+        "h1",
+        "--motion",
+        "dance1_subject1",
+        env={"RD_RETARGETED_DIR": str(tmp_path), "RD_ARTIFACTS": str(tmp_path / "store")},
+    )
     assert result.returncode == 2 and "Traceback" not in result.stderr
     assert f"error: {path}:42: expected 26 values, got 25" in result.stderr
     assert not list((tmp_path / "store" / "import" / "h1" / "dance1_subject1").glob("[!.]*"))

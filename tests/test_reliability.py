@@ -25,10 +25,26 @@ def _states(robot: str, motion: str, *extra: str) -> dict[str, dict]:
 
 @pytest.mark.slow
 def test_two_runs_of_one_key_started_together_both_succeed(artifacts: Path) -> None:
-    args = [sys.executable, "-m", "rd_pipeline", "run", "--robot", "g1", "--motion", "dance1_subject2",
-            "--until", "train", "--clip", "0:4", "--set", "train.iterations=4", "train.checkpoint_every=2"]
-    runs = [subprocess.Popen(args, cwd=PROJECT, env=os.environ.copy(), stderr=subprocess.PIPE, text=True)
-            for _ in range(2)]
+    args = [
+        sys.executable,
+        "-m",
+        "rd_pipeline",
+        "run",
+        "--robot",
+        "g1",
+        "--motion",
+        "dance1_subject2",
+        "--until",
+        "train",
+        "--clip",
+        "0:4",
+        "--set",
+        "train.iterations=4",
+        "train.checkpoint_every=2",
+    ]
+    runs = [
+        subprocess.Popen(args, cwd=PROJECT, env=os.environ.copy(), stderr=subprocess.PIPE, text=True) for _ in range(2)
+    ]
     errors = [run.communicate(timeout=600)[1] for run in runs]
     assert [run.returncode for run in runs] == [0, 0], errors
     train = artifacts / "train" / "g1" / "dance1_subject2"
@@ -44,7 +60,7 @@ def test_two_runs_of_one_key_started_together_both_succeed(artifacts: Path) -> N
     trainer = next(e for e in errors if "run    train" in e)
     assert "" not in trainer.splitlines()
     assert "  PPO g1: 4/4 (" in trainer
-    summary = trainer[trainer.index("summary g1/dance1_subject2:"):].splitlines()
+    summary = trainer[trainer.index("summary g1/dance1_subject2:") :].splitlines()
     assert [line.split()[0] for line in summary[1:]] == ["parse", "retarget", "stats", "prior", "train"]
     assert summary[-1].split()[1] == "ran"  # the other run may have computed the upstream stages
     assert "iterations=4" in summary[-1]
@@ -99,8 +115,16 @@ def test_a_three_frame_bvh_is_refused_by_parse_with_the_minimum(tmp_path: Path) 
     short = [*lines[: header + 1], "Frames: 3", lines[header + 2], *lines[header + 3 : header + 6]]
     path = tmp_path / "dance1_subject2.bvh"
     path.write_text("\n".join(short) + "\n")
-    result = cli("run", "--robot", "g1", "--motion", "dance1_subject2", "--until", "parse",
-                 env={"RD_LAFAN_DIR": str(tmp_path), "RD_ARTIFACTS": str(tmp_path / "store")})
+    result = cli(
+        "run",
+        "--robot",
+        "g1",
+        "--motion",
+        "dance1_subject2",
+        "--until",
+        "parse",
+        env={"RD_LAFAN_DIR": str(tmp_path), "RD_ARTIFACTS": str(tmp_path / "store")},
+    )
     assert result.returncode == 2 and "Traceback" not in result.stderr
     errors = [line for line in result.stderr.splitlines() if line.startswith("error:")]
     assert errors == [f"error: {path}: 3 frames at 30 fps is 0.10 s; a motion must last at least 1 s"]
@@ -112,8 +136,15 @@ def test_a_csv_of_a_few_rows_is_refused_with_the_minimum(rows: int, tmp_path: Pa
     path = tmp_path / "h1" / "dance1_subject1.csv"
     path.parent.mkdir()
     path.write_text("\n".join(source[:rows]) + "\n")
-    result = cli("stage", "import", "--robot", "h1", "--motion", "dance1_subject1",
-                 env={"RD_RETARGETED_DIR": str(tmp_path), "RD_ARTIFACTS": str(tmp_path / "store")})
+    result = cli(
+        "stage",
+        "import",
+        "--robot",
+        "h1",
+        "--motion",
+        "dance1_subject1",
+        env={"RD_RETARGETED_DIR": str(tmp_path), "RD_ARTIFACTS": str(tmp_path / "store")},
+    )
     assert result.returncode == 2 and "Traceback" not in result.stderr
     seconds = f"{rows / 30:.2f}"
     assert f"error: {path}: {rows} frames at 30 fps is {seconds} s; a motion must last at least 1 s" in result.stderr

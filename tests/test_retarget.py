@@ -21,8 +21,14 @@ from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.robots import load_robot
 
 SPEC_QUALITY_KEYS = {
-    "fps_frames_per_s", "penetration_max_mm", "penetration_p95_mm", "skate_stance_mean_mm_s",
-    "joint_limit_violations", "velocity_limit_violations", "self_collision_frames", "jerk_mean",
+    "fps_frames_per_s",
+    "penetration_max_mm",
+    "penetration_p95_mm",
+    "skate_stance_mean_mm_s",
+    "joint_limit_violations",
+    "velocity_limit_violations",
+    "self_collision_frames",
+    "jerk_mean",
     "keypoint_error_mean_mm",
 }
 
@@ -47,8 +53,9 @@ def g1_dance() -> RetargetResult:
 
 def test_constraints_hold_on_a_real_clip(g1_dance: RetargetResult) -> None:
     robot = load_robot("g1")
-    q = retarget_quality(robot, g1_dance.reference, keypoint_targets=g1_dance.targets.positions,
-                         keypoint_bodies=g1_dance.targets.bodies)
+    q = retarget_quality(
+        robot, g1_dance.reference, keypoint_targets=g1_dance.targets.positions, keypoint_bodies=g1_dance.targets.bodies
+    )
     assert g1_dance.reference.fps == 50.0 and g1_dance.reference.n_frames == 1250
     assert q["penetration_max_mm"] <= 5.0
     assert q["joint_limit_violations"] == 0
@@ -119,12 +126,15 @@ def test_clip_shorter_than_a_frame_period() -> None:
 
 def test_retarget_map_with_an_unknown_human_joint() -> None:
     robot = load_robot("g1")
-    config = dataclasses.replace(robot.config, retarget_map={**robot.config.retarget_map, "left_elbow_link": "LeftElbow"})
+    config = dataclasses.replace(
+        robot.config, retarget_map={**robot.config.retarget_map, "left_elbow_link": "LeftElbow"}
+    )
     broken = dataclasses.replace(robot, config=config)
     p = RetargetParams()
     with pytest.raises(PipelineError, match=r"bodies.retarget names human joint 'LeftElbow', not in the skeleton"):
-        retarget(_human("dance1_subject2", seconds=1.0), broken, p.fps, p.contact, p.shape, p.body_contact,
-                 p.weights, p.ik)
+        retarget(
+            _human("dance1_subject2", seconds=1.0), broken, p.fps, p.contact, p.shape, p.body_contact, p.weights, p.ik
+        )
 
 
 def test_stage_writes_reference_and_quality(artifacts: Path) -> None:
@@ -135,6 +145,9 @@ def test_stage_writes_reference_and_quality(artifacts: Path) -> None:
     assert SPEC_QUALITY_KEYS <= set(quality)
     assert quality["joint_limit_violations"] == 0 and quality["penetration_max_mm"] <= 5.0
     manifest = json.loads((folder / "manifest.json").read_text())
-    assert manifest["upstream"] == {"parse": json.loads(
-        next((artifacts / "parse" / "dance1_subject3").iterdir()).joinpath("manifest.json").read_text())["key"]}
+    assert manifest["upstream"] == {
+        "parse": json.loads(
+            next((artifacts / "parse" / "dance1_subject3").iterdir()).joinpath("manifest.json").read_text()
+        )["key"]
+    }
     assert manifest["metrics"]["skate_stance_mean_mm_s"] == quality["skate_stance_mean_mm_s"]

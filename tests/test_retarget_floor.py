@@ -45,8 +45,9 @@ def excerpt(request) -> tuple[str, RetargetResult, dict, dict]:
     motion, start_s, end_s = EXCERPTS[request.param]
     p = RetargetParams()
     robot = load_robot("g1")
-    result = retarget(_excerpt(motion, start_s, end_s), robot, p.fps, p.contact, p.shape, p.body_contact,
-                      p.weights, p.ik)
+    result = retarget(
+        _excerpt(motion, start_s, end_s), robot, p.fps, p.contact, p.shape, p.body_contact, p.weights, p.ik
+    )
     targets = result.targets
     series = quality_series(robot, result.reference, targets.positions, targets.bodies, targets.human_pelvis)
     return request.param, result, series, summarize_quality(robot, result.reference, series)

@@ -20,11 +20,25 @@ from rd_pipeline.robots.hulls import BodyHulls
 from rd_pipeline.robots.model import collision_geoms
 
 KEYS = {
-    "frames", "fps_frames_per_s", "penetration_max_mm", "penetration_p95_mm", "penetration_deepest_body",
-    "feet_penetration_max_mm", "feet_penetration_p95_mm", "pelvis_height_dev_p95_m", "skate_stance_mean_mm_s",
-    "joint_limit_violations", "velocity_limit_violations", "self_collision_frames", "jerk_mean",
-    "keypoint_error_mean_mm", "keypoint_error_p95_mm", "keypoint_error_max_mm", "diverged_frames",
-    "root_speed_p999_m_s", "human_root_speed_p999_m_s",
+    "frames",
+    "fps_frames_per_s",
+    "penetration_max_mm",
+    "penetration_p95_mm",
+    "penetration_deepest_body",
+    "feet_penetration_max_mm",
+    "feet_penetration_p95_mm",
+    "pelvis_height_dev_p95_m",
+    "skate_stance_mean_mm_s",
+    "joint_limit_violations",
+    "velocity_limit_violations",
+    "self_collision_frames",
+    "jerk_mean",
+    "keypoint_error_mean_mm",
+    "keypoint_error_p95_mm",
+    "keypoint_error_max_mm",
+    "diverged_frames",
+    "root_speed_p999_m_s",
+    "human_root_speed_p999_m_s",
 }
 
 # G1 left arm swung in across the chest: the elbow sinks into the torso (found by a grid search over the
@@ -84,7 +98,7 @@ def test_penetration_matches_full_mesh_in_mujoco(g1, g1_dance) -> None:
     body = g1.body_ids[g1.config.foot_bodies[foot]]
     geom = next(g for g in range(model.ngeom) if model.geom_bodyid[g] == body and model.geom_dataid[g] >= 0)
     mesh = model.geom_dataid[geom]
-    vertices = model.mesh_vert[model.mesh_vertadr[mesh]:model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]]
+    vertices = model.mesh_vert[model.mesh_vertadr[mesh] : model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]]
     world_z = (vertices @ data.geom_xmat[geom].reshape(3, 3).T + data.geom_xpos[geom])[:, 2]
     assert quality["feet_penetration_max_mm"] == pytest.approx(-1000.0 * world_z.min(), abs=1e-3)
 
@@ -165,9 +179,9 @@ def test_keypoint_error(g1) -> None:
     reference = _hand_built(g1, _standing(g1, 20))
     bodies = ["left_elbow_link", "right_ankle_roll_link", "pelvis"]
     exact = reference.body_pos_w[:, [reference.body_names.index(b) for b in bodies]]
-    assert retarget_quality(g1, reference, keypoint_targets=exact, keypoint_bodies=bodies)[
-        "keypoint_error_mean_mm"
-    ] == 0.0
+    assert (
+        retarget_quality(g1, reference, keypoint_targets=exact, keypoint_bodies=bodies)["keypoint_error_mean_mm"] == 0.0
+    )
     shifted = exact + [0.018, 0.0, -0.024]  # 3 cm
     quality = retarget_quality(g1, reference, keypoint_targets=shifted, keypoint_bodies=bodies, frames_per_s=123.4)
     assert quality["keypoint_error_mean_mm"] == pytest.approx(30.0, abs=1e-3)
@@ -186,7 +200,7 @@ def _exact_lowest_z(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> fl
     kind = model.geom_type[geom]
     if kind == mujoco.mjtGeom.mjGEOM_MESH:
         mesh = model.geom_dataid[geom]
-        vertices = model.mesh_vert[model.mesh_vertadr[mesh]:model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]]
+        vertices = model.mesh_vert[model.mesh_vertadr[mesh] : model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]]
         return float((vertices @ rotation.T + centre)[:, 2].min())
     axis_z = rotation[2, 2]
     if kind == mujoco.mjtGeom.mjGEOM_SPHERE:

@@ -28,22 +28,43 @@ def _state(**changes) -> TrackingState:
     body = torch.arange(N * B * 3, dtype=torch.float64).reshape(N, B, 3) / 10
     joints = torch.linspace(-0.5, 0.5, P, dtype=torch.float64).repeat(N, 1)
     values = dict(
-        body_pos=body.clone(), body_quat=quat.clone(), body_lin_vel=zeros(N, B, 3), body_ang_vel=zeros(N, B, 3),
-        joint_pos=joints.clone(), joint_vel=zeros(N, P), ref_body_pos=body.clone(), ref_body_quat=quat.clone(),
-        ref_body_lin_vel=zeros(N, B, 3), ref_body_ang_vel=zeros(N, B, 3), ref_joint_pos=joints.clone(),
-        ref_joint_vel=zeros(N, P), feet_contact=torch.ones(N, 2, dtype=torch.bool),
-        ref_feet_contact=torch.ones(N, 2, dtype=torch.bool), feet_force=zeros(N, 2, 3), feet_speed=zeros(N, 2),
-        torque=zeros(N, P), joint_acc=zeros(N, P), action=zeros(N, P), last_action=zeros(N, P),
-        second_last_action=zeros(N, P), feet_air_time=zeros(N, 2), undesired_contacts=zeros(N), terminated=torch.zeros(N, dtype=torch.bool),
+        body_pos=body.clone(),
+        body_quat=quat.clone(),
+        body_lin_vel=zeros(N, B, 3),
+        body_ang_vel=zeros(N, B, 3),
+        joint_pos=joints.clone(),
+        joint_vel=zeros(N, P),
+        ref_body_pos=body.clone(),
+        ref_body_quat=quat.clone(),
+        ref_body_lin_vel=zeros(N, B, 3),
+        ref_body_ang_vel=zeros(N, B, 3),
+        ref_joint_pos=joints.clone(),
+        ref_joint_vel=zeros(N, P),
+        feet_contact=torch.ones(N, 2, dtype=torch.bool),
+        ref_feet_contact=torch.ones(N, 2, dtype=torch.bool),
+        feet_force=zeros(N, 2, 3),
+        feet_speed=zeros(N, 2),
+        torque=zeros(N, P),
+        joint_acc=zeros(N, P),
+        action=zeros(N, P),
+        last_action=zeros(N, P),
+        second_last_action=zeros(N, P),
+        feet_air_time=zeros(N, 2),
+        undesired_contacts=zeros(N),
+        terminated=torch.zeros(N, dtype=torch.bool),
     )
     values.update(changes)
     return TrackingState(**values)
 
 
 CONTEXT = TermContext(
-    root=0, feet=(3, 4), keypoints=(1, 2),
-    joint_lower=torch.full((P,), -1.0, dtype=torch.float64), joint_upper=torch.full((P,), 1.0, dtype=torch.float64),
-    velocity_limit=torch.full((P,), 10.0, dtype=torch.float64), effort_limit=torch.full((P,), 50.0, dtype=torch.float64),
+    root=0,
+    feet=(3, 4),
+    keypoints=(1, 2),
+    joint_lower=torch.full((P,), -1.0, dtype=torch.float64),
+    joint_upper=torch.full((P,), 1.0, dtype=torch.float64),
+    velocity_limit=torch.full((P,), 10.0, dtype=torch.float64),
+    effort_limit=torch.full((P,), 50.0, dtype=torch.float64),
 )
 MANAGER = RewardManager(RewardsCfg(), CONTEXT)
 
@@ -55,8 +76,13 @@ def compute_rewards(state, penalty_scale, sigma=None):
 def test_perfect_tracking_earns_every_tracking_weight() -> None:
     groups, terms, _ = compute_rewards(_state(), penalty_scale=0.8)
     assert GROUPS == ("body", "root", "joint", "contact", "regularization")
-    expected = {"body": 2.0 + 0.5 + 1.8 + 0.5 + 2.0 + 0.5 + 0.5 + 0.5 + 0.5, "root": 2.25, "joint": 1.5,
-                "contact": 0.5, "regularization": 0.0}
+    expected = {
+        "body": 2.0 + 0.5 + 1.8 + 0.5 + 2.0 + 0.5 + 0.5 + 0.5 + 0.5,
+        "root": 2.25,
+        "joint": 1.5,
+        "contact": 0.5,
+        "regularization": 0.0,
+    }
     for g, name in enumerate(GROUPS):
         assert torch.allclose(groups[:, g], torch.full((N,), expected[name], dtype=torch.float64))
     assert set(terms) >= {"body_pos", "termination", "slippage"}
@@ -79,14 +105,24 @@ def test_hand_computed_terms() -> None:
     air[2, 1] = 0.6  # ... and env 2's right foot after 0.6 s, where the reference has it in the air
     reference_contact = torch.ones(N, 2, dtype=torch.bool)
     reference_contact[2, 1] = False
-    state = _state(body_pos=body, joint_pos=joints, torque=torque, feet_force=force, terminated=terminated,
-                   body_quat=quat, feet_air_time=air, ref_feet_contact=reference_contact)
+    state = _state(
+        body_pos=body,
+        joint_pos=joints,
+        torque=torque,
+        feet_force=force,
+        terminated=terminated,
+        body_quat=quat,
+        feet_air_time=air,
+        ref_feet_contact=reference_contact,
+    )
     _, terms, _ = compute_rewards(state, penalty_scale=0.8)
     assert torch.allclose(terms["body_pos"], torch.full((N,), 2.0 * math.exp(-1.0), dtype=torch.float64))
-    assert torch.allclose(terms["body_pos_rel"], torch.full((N,), 0.5, dtype=torch.float64))  # a shift is not a pose error
+    assert torch.allclose(
+        terms["body_pos_rel"], torch.full((N,), 0.5, dtype=torch.float64)
+    )  # a shift is not a pose error
     assert torch.allclose(terms["joint_pos"], torch.full((N,), 1.0 * math.exp(-1.0), dtype=torch.float64))
     angle = math.radians(10)
-    assert terms["root_orientation"][0].item() == pytest.approx(0.25 * math.exp(-angle**2 / 0.25**2))
+    assert terms["root_orientation"][0].item() == pytest.approx(0.25 * math.exp(-(angle**2) / 0.25**2))
     assert terms["body_orientation"][0].item() == pytest.approx(0.5 * math.exp(-(angle**2 / B) / 0.1**2))
     assert torch.allclose(terms["torque"], torch.full((N,), -1e-6 * 0.8 * 4 * 100, dtype=torch.float64))
     assert torch.allclose(terms["foot_contact_force"], torch.full((N,), -0.01 * 0.8 * 100, dtype=torch.float64))
@@ -107,6 +143,7 @@ def test_adaptive_sigma_follows_the_error_and_never_widens() -> None:
     for _ in range(20):
         adaptive.update(compute_rewards(_state(body_pos=body), 1.0)[2])
     assert adaptive.sigma()["body_pos"] == pytest.approx(0.02)
+
 
 def _single_head_gae(rewards, values, dones, last, gamma, lam):
     advantage, out = torch.zeros_like(last), torch.zeros_like(rewards)
@@ -136,12 +173,33 @@ def test_multi_head_gae_is_per_head_gae() -> None:
 
 PRESET_RESIDUAL_JOINTS = {
     # Policy joints with residual semantics per preset: G1 (23 policy joints), H1 (19), H1-2 (21).
-    "g1": {"absolute": 0, "selective": 4, "hip_knee_ankle": 8, "all_legs": 12, "legs_torso": 13, "all": 23,
-           "reference_locked": 4},
-    "h1": {"absolute": 0, "selective": 4, "hip_knee_ankle": 6, "all_legs": 10, "legs_torso": 11, "all": 19,
-           "reference_locked": 4},
-    "h1_2": {"absolute": 0, "selective": 4, "hip_knee_ankle": 8, "all_legs": 12, "legs_torso": 13, "all": 21,
-             "reference_locked": 4},
+    "g1": {
+        "absolute": 0,
+        "selective": 4,
+        "hip_knee_ankle": 8,
+        "all_legs": 12,
+        "legs_torso": 13,
+        "all": 23,
+        "reference_locked": 4,
+    },
+    "h1": {
+        "absolute": 0,
+        "selective": 4,
+        "hip_knee_ankle": 6,
+        "all_legs": 10,
+        "legs_torso": 11,
+        "all": 19,
+        "reference_locked": 4,
+    },
+    "h1_2": {
+        "absolute": 0,
+        "selective": 4,
+        "hip_knee_ankle": 8,
+        "all_legs": 12,
+        "legs_torso": 13,
+        "all": 21,
+        "reference_locked": 4,
+    },
 }
 
 

@@ -89,7 +89,9 @@ def test_joint_order_mismatch_is_named(tmp_path: Path) -> None:
     path = _broken_config(
         tmp_path, "h1", '"left_hip_yaw_joint", "left_hip_roll_joint"', '"left_hip_roll_joint", "left_hip_yaw_joint"'
     )
-    with pytest.raises(PipelineError, match=r"joints.order\[0\] is 'left_hip_roll_joint' but actuator 0 drives 'left_hip_yaw_joint'"):
+    with pytest.raises(
+        PipelineError, match=r"joints.order\[0\] is 'left_hip_roll_joint' but actuator 0 drives 'left_hip_yaw_joint'"
+    ):
         check_against_model(load_robot_config("h1", path), load_robot("h1").model)
 
 

@@ -21,8 +21,9 @@ TOLERANCE = 1e-9
 
 def test_batched_stepping_equals_sequential_mj_step() -> None:
     robot = load_robot("g1")
-    reference = import_retargeted_csv(RETARGETED_DIR / "g1" / "dance1_subject2.csv", robot, 30.0, 50.0, "cubic",
-                                      ContactThresholds()).reference
+    reference = import_retargeted_csv(
+        RETARGETED_DIR / "g1" / "dance1_subject2.csv", robot, 30.0, 50.0, "cubic", ContactThresholds()
+    ).reference
     base = simulation_model(robot, collision="primitive", body_sensors=True)
     heavy = copy.copy(base)
     heavy.body_mass[1:] *= 1.1  # per-environment (randomized) models stay supported

@@ -55,9 +55,7 @@ def test_cache_hit_does_no_work_and_force_redoes_it(artifacts: Path) -> None:
     manifest = json.loads((first.path / "manifest.json").read_text())
     assert manifest["stage"] == "parse" and manifest["key"] == first.key and manifest["robot"] is None
     assert manifest["metrics"]["frames"] == 3945 and manifest["duration_s"] > 0
-    assert list(manifest["inputs"].values()) == [
-        "4f15d0b1caac72f9e58745f5ab9183d7dc051dd6fcdc4e1bd90af128b8cfab4d"
-    ]
+    assert list(manifest["inputs"].values()) == ["4f15d0b1caac72f9e58745f5ab9183d7dc051dd6fcdc4e1bd90af128b8cfab4d"]
     stamp = (first.path / "human_motion.npz").stat().st_mtime_ns
     (second,) = execute(pipeline, store, until="parse")
     assert second.cached and second.key == first.key
@@ -85,7 +83,9 @@ def test_selection_errors() -> None:
     known = ", ".join(stage_names())
     with pytest.raises(PipelineError, match=rf"^--until: unknown stage 'no_such_stage' \(stages: {known}\)$"):
         pipeline.select(None, "no_such_stage", None)
-    with pytest.raises(PipelineError, match=r"^--only: stage 'parse' is not in the csv pipeline for h1_2/dance2_subject4"):
+    with pytest.raises(
+        PipelineError, match=r"^--only: stage 'parse' is not in the csv pipeline for h1_2/dance2_subject4"
+    ):
         pipeline.select(None, None, "parse")
 
 
@@ -105,8 +105,13 @@ def test_tuple_parameters_from_set() -> None:
 
     validate, train = (next(s for s in REGISTRY if s.name == n) for n in ("validate", "train"))
     assert build_params(validate, {"randomized_seeds": "[0, 1, 2]"}).randomized_seeds == (0, 1, 2)
-    assert build_params(train, {"env.randomization.push_interval_s": "4,8"}).env.randomization.push_interval_s == (4.0, 8.0)
-    with pytest.raises(PipelineError, match=r"^parameter 'train.env.randomization.push_interval_s' must be a number, got 'x'$"):
+    assert build_params(train, {"env.randomization.push_interval_s": "4,8"}).env.randomization.push_interval_s == (
+        4.0,
+        8.0,
+    )
+    with pytest.raises(
+        PipelineError, match=r"^parameter 'train.env.randomization.push_interval_s' must be a number, got 'x'$"
+    ):
         build_params(train, {"env.randomization.push_interval_s": "4,x"})
 
 
@@ -131,7 +136,9 @@ def test_cli_cache_hit_and_status_json(artifacts: Path) -> None:
     status = json.loads(cli("status", "--json").stdout)
     states = {
         (p["robot"], p["motion"], s["stage"]): s["state"]
-        for p in status["pipelines"] for s in p["stages"] if s["state"] != "missing"
+        for p in status["pipelines"]
+        for s in p["stages"]
+        if s["state"] != "missing"
     }
     # parse is robot-independent: its artifact belongs to no robot.
     assert states == {(None, "dance1_subject2", "parse"): "cached", ("h1_2", "dance2_subject4", "import"): "cached"}
@@ -145,7 +152,10 @@ def test_killed_stage_leaves_no_artifact(artifacts: Path) -> None:
     folder = artifacts / "import" / "h1_2" / "dance2_subject4"
     process = subprocess.Popen(
         [sys.executable, "-m", "rd_pipeline", "stage", "import", "--robot", "h1_2", "--motion", "dance2_subject4"],
-        cwd=PROJECT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=os.environ.copy(),
+        cwd=PROJECT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=os.environ.copy(),
     )
     deadline = time.time() + 60
     while not list(folder.glob(".tmp-*")) and time.time() < deadline:
@@ -168,8 +178,23 @@ def test_interrupt_removes_the_partial_artifact(artifacts: Path) -> None:
     # Retargeting runs for seconds, so the interrupt lands inside the stage's work, not after it.
     folder = artifacts / "retarget" / "g1" / "dance1_subject1"
     process = subprocess.Popen(
-        [sys.executable, "-m", "rd_pipeline", "run", "--robot", "g1", "--motion", "dance1_subject1", "--until", "retarget"],
-        cwd=PROJECT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=os.environ.copy(),
+        [
+            sys.executable,
+            "-m",
+            "rd_pipeline",
+            "run",
+            "--robot",
+            "g1",
+            "--motion",
+            "dance1_subject1",
+            "--until",
+            "retarget",
+        ],
+        cwd=PROJECT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=os.environ.copy(),
         # A shell that started us in the background ignores SIGINT, and children inherit that; a user's
         # terminal does not, so give the child the default disposition (Python then raises KeyboardInterrupt).
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),

@@ -86,9 +86,16 @@ def test_sampler_cap_with_a_concentrated_failure(stats: SegmentStats) -> None:
     assert sampler.failure_rate[3].item() == pytest.approx(1 - 0.95**40) and sampler.failure_rate[7] == 0
 
 
-@pytest.mark.parametrize(("step", "failure", "distribution"), [
-    (0, 0.4, 0.2), (48_000, 0.4, 0.2), (72_000, 0.475, 0.125), (96_000, 0.55, 0.05), (200_000, 0.55, 0.05),
-])
+@pytest.mark.parametrize(
+    ("step", "failure", "distribution"),
+    [
+        (0, 0.4, 0.2),
+        (48_000, 0.4, 0.2),
+        (72_000, 0.475, 0.125),
+        (96_000, 0.55, 0.05),
+        (200_000, 0.55, 0.05),
+    ],
+)
 def test_mixture_ramps_hit_the_appendix_values(step: int, failure: float, distribution: float) -> None:
     sampler = SegmentSampler(SamplerConfig(), torch.ones(10), seed=0)
     uniform, d, f = sampler.mixture_weights(step)

@@ -17,8 +17,11 @@ FAST = ("train.iterations=1", "train.clip=0:4")
 
 def test_ray_sweep_reports_a_failing_trial_and_finishes_the_others(artifacts: Path) -> None:
     pytest.importorskip("ray", reason="the ray extra is not installed (CI installs it)")
-    trials = [Trial("g1", "dance1_subject2", 0, "fast", FAST), Trial("g1", "dance1_subject2", 1, "fast", FAST),
-              Trial("g1", "dance1_subject2", 0, "broken", ("train.iterations=1", "train.clip=0:0.5"))]
+    trials = [
+        Trial("g1", "dance1_subject2", 0, "fast", FAST),
+        Trial("g1", "dance1_subject2", 1, "fast", FAST),
+        Trial("g1", "dance1_subject2", 0, "broken", ("train.iterations=1", "train.clip=0:0.5")),
+    ]
     seen = []
 
     results = run_sweep(trials, "smoke", "ray", 2, None, lambda t: validation_report(t, "smoke"), seen.append)
@@ -34,8 +37,22 @@ def test_ray_sweep_reports_a_failing_trial_and_finishes_the_others(artifacts: Pa
 
 
 def test_ablate_residual_writes_the_paper_table(artifacts: Path) -> None:
-    result = cli("ablate", "residual", "--robots", "g1", "--motions", "dance1_subject2", "--seeds", "0",
-                 "--arms", "absolute", "all", "selective", "--set", *FAST)
+    result = cli(
+        "ablate",
+        "residual",
+        "--robots",
+        "g1",
+        "--motions",
+        "dance1_subject2",
+        "--seeds",
+        "0",
+        "--arms",
+        "absolute",
+        "all",
+        "selective",
+        "--set",
+        *FAST,
+    )
     assert result.returncode == 0, result.stderr
     (folder,) = (artifacts / "sweeps").iterdir()
     table = json.loads((folder / "ablation.json").read_text())

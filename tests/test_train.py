@@ -29,8 +29,9 @@ from rd_pipeline.sampling.segments import segment_bounds
 def _setup(seed: int = 3, config: EnvConfig = EnvConfig(num_envs=4, threads=2)):
     torch.manual_seed(seed)
     robot = load_robot("h1_2")
-    reference = import_retargeted_csv(RETARGETED_DIR / "h1_2" / "dance2_subject4.csv", robot, 30.0, 50.0, "cubic",
-                                      ContactThresholds()).reference
+    reference = import_retargeted_csv(
+        RETARGETED_DIR / "h1_2" / "dance2_subject4.csv", robot, 30.0, 50.0, "cubic", ContactThresholds()
+    ).reference
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
     sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=seed)
     env = TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=seed)
@@ -75,7 +76,9 @@ def test_a_reward_weight_and_a_termination_threshold_set_on_the_command_line_cha
     }
     keys = {}
     for label, sets in changes.items():
-        result = cli("status", "--robot", "g1", "--motion", "dance1_subject2", "--json", *(("--set", *sets) if sets else ()))
+        result = cli(
+            "status", "--robot", "g1", "--motion", "dance1_subject2", "--json", *(("--set", *sets) if sets else ())
+        )
         assert result.returncode == 0, result.stderr
         stages = json.loads(result.stdout)["pipelines"][0]["stages"]
         keys[label] = {row["stage"]: row["key"] for row in stages}
@@ -83,8 +86,10 @@ def test_a_reward_weight_and_a_termination_threshold_set_on_the_command_line_cha
     assert len({keys[label]["train"] for label in changes}) == 3
 
     stage = next(s for s in REGISTRY if s.name == "train")
-    configs = {label: build_params(stage, parse_assignments(sets, ["train"]).get("train", {})).env
-               for label, sets in changes.items()}
+    configs = {
+        label: build_params(stage, parse_assignments(sets, ["train"]).get("train", {})).env
+        for label, sets in changes.items()
+    }
     configs = {label: replace(config, num_envs=4, threads=2) for label, config in configs.items()}
     assert configs["weight"].rewards.body_pos.weight == 3.0
     rollouts = {}
@@ -106,8 +111,9 @@ def test_a_reward_weight_and_a_termination_threshold_set_on_the_command_line_cha
     assert np.mean(rollouts["limit"][1]) < np.mean(default_lengths or [30])
 
 
-@pytest.mark.parametrize(("robot", "motion"), [("g1", "dance1_subject2"), ("h1", "dance1_subject1"),
-                                                ("h1_2", "dance2_subject4")])
+@pytest.mark.parametrize(
+    ("robot", "motion"), [("g1", "dance1_subject2"), ("h1", "dance1_subject1"), ("h1_2", "dance2_subject4")]
+)
 def test_smoke_profile_runs_the_dag_to_export(robot: str, motion: str, artifacts: Path) -> None:
     result = cli("run", "--robot", robot, "--motion", motion, "--until", "export", "--profile", "smoke")
     assert result.returncode == 0, result.stderr
@@ -122,8 +128,9 @@ def test_smoke_profile_runs_the_dag_to_export(robot: str, motion: str, artifacts
     assert action["mode"] == "selective"
     assert len(action["outputs"]) == {"g1": 23, "h1": 19, "h1_2": 21}[robot] == metrics["num_actions"]
     residual = [joint for joint, kind in zip(action["outputs"], action["semantics"]) if kind == "residual"]
-    assert sorted(residual) == sorted(f"{side}_{joint}_joint" for side in ("left", "right")
-                                      for joint in ("hip_pitch", "knee"))
+    assert sorted(residual) == sorted(
+        f"{side}_{joint}_joint" for side in ("left", "right") for joint in ("hip_pitch", "knee")
+    )
     assert action["semantics"].count("absolute") == len(action["outputs"]) - 4
 
 
@@ -136,11 +143,28 @@ def test_cli_resume_continues_an_interrupted_training(artifacts: Path) -> None:
 
     from conftest import PROJECT
 
-    args = ["run", "--robot", "h1_2", "--motion", "dance2_subject4", "--until", "train", "--profile", "smoke",
-            "--set", "train.iterations=30", "train.checkpoint_every=1"]
-    process = subprocess.Popen([sys.executable, "-m", "rd_pipeline", *args], cwd=PROJECT, env=os.environ.copy(),
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    args = [
+        "run",
+        "--robot",
+        "h1_2",
+        "--motion",
+        "dance2_subject4",
+        "--until",
+        "train",
+        "--profile",
+        "smoke",
+        "--set",
+        "train.iterations=30",
+        "train.checkpoint_every=1",
+    ]
+    process = subprocess.Popen(
+        [sys.executable, "-m", "rd_pipeline", *args],
+        cwd=PROJECT,
+        env=os.environ.copy(),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     folder = artifacts / "train" / "h1_2" / "dance2_subject4"
     deadline = time.time() + 300
     while not list(folder.glob(".work-*/checkpoints/model_3.pt")) and time.time() < deadline:

@@ -27,8 +27,9 @@ def test_warp_backend_matches_c_mujoco_on_a_short_rollout() -> None:
     from rd_pipeline.rl.warp_backend import MujocoWarpBackend
 
     robot = load_robot("g1")
-    reference = import_retargeted_csv(RETARGETED_DIR / "g1" / "dance1_subject2.csv", robot, 30.0, 50.0, "cubic",
-                                      ContactThresholds()).reference
+    reference = import_retargeted_csv(
+        RETARGETED_DIR / "g1" / "dance1_subject2.csv", robot, 30.0, 50.0, "cubic", ContactThresholds()
+    ).reference
     base = simulation_model(robot)
     heavy = copy.copy(base)
     heavy.body_mass[1:] *= 1.1  # a randomized world: per-world fields must reach Warp
@@ -75,8 +76,9 @@ def test_ppo_trains_through_the_warp_backend(tmp_path) -> None:
 
     torch.manual_seed(0)
     robot = load_robot("g1")
-    reference = import_retargeted_csv(RETARGETED_DIR / "g1" / "dance1_subject2.csv", robot, 30.0, 50.0, "cubic",
-                                      ContactThresholds()).reference.frames(0, 250)
+    reference = import_retargeted_csv(
+        RETARGETED_DIR / "g1" / "dance1_subject2.csv", robot, 30.0, 50.0, "cubic", ContactThresholds()
+    ).reference.frames(0, 250)
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
     sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=0)
     config = EnvConfig(num_envs=4, backend="warp", device="cpu")

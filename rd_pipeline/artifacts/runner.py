@@ -148,8 +148,14 @@ def resolve_source(robot: str | None, motion: str, forced: str | None) -> str:
 
 
 def execute(
-    pipeline: Pipeline, store: ArtifactStore, start: str | None = None, until: str | None = None,
-    only: str | None = None, force: bool = False, console: Console | None = None, resume: bool = False,
+    pipeline: Pipeline,
+    store: ArtifactStore,
+    start: str | None = None,
+    until: str | None = None,
+    only: str | None = None,
+    force: bool = False,
+    console: Console | None = None,
+    resume: bool = False,
 ) -> list[StageOutcome]:
     """Run the selected stages; cached artifacts are reused without doing any work, damaged ones are
     recomputed, and a key another process is computing is waited for, then reused."""
@@ -181,7 +187,9 @@ def execute(
                     console.print(f"[cyan]run[/]    {stage.name:<9} {label}  {entry.key}")
                     ref = _run_stage(pipeline, store, entry, refs, console, resume=resume)
                     seconds = time.perf_counter() - began
-                    console.print(f"[green]done[/]   {stage.name:<9} {label}  {entry.key}  ({seconds:.2f} s) -> {ref.path}")
+                    console.print(
+                        f"[green]done[/]   {stage.name:<9} {label}  {entry.key}  ({seconds:.2f} s) -> {ref.path}"
+                    )
                     refs[stage.provides] = ref
                     outcomes.append(StageOutcome(stage.name, entry.key, ref.path, False, seconds))
                     continue
@@ -193,7 +201,11 @@ def execute(
 
 
 def _usable_artifacts(
-    pipeline: Pipeline, store: ArtifactStore, planned: list[PlannedStage], selected: list[Stage], force: bool,
+    pipeline: Pipeline,
+    store: ArtifactStore,
+    planned: list[PlannedStage],
+    selected: list[Stage],
+    force: bool,
     console: Console,
 ) -> dict[str, ArtifactRef]:
     """Stage name -> its artifact when it exists and is whole.
@@ -223,8 +235,9 @@ def _whole(ref: ArtifactRef, full: bool, console: Console) -> bool:
     return problem is None
 
 
-def _made_meanwhile(store: ArtifactStore, entry: PlannedStage, robot: str | None, motion: str,
-                    force: bool) -> ArtifactRef | None:
+def _made_meanwhile(
+    store: ArtifactStore, entry: PlannedStage, robot: str | None, motion: str, force: bool
+) -> ArtifactRef | None:
     """The artifact a concurrent run finished while this one waited for the key's lock (a damaged
     one found before the wait is still damaged, unless that run replaced it)."""
     if force:
@@ -234,8 +247,12 @@ def _made_meanwhile(store: ArtifactStore, entry: PlannedStage, robot: str | None
 
 
 def _run_stage(
-    pipeline: Pipeline, store: ArtifactStore, entry: PlannedStage, refs: dict[str, ArtifactRef],
-    console: Console, resume: bool,
+    pipeline: Pipeline,
+    store: ArtifactStore,
+    entry: PlannedStage,
+    refs: dict[str, ArtifactRef],
+    console: Console,
+    resume: bool,
 ) -> ArtifactRef:
     stage = entry.stage
     robot = pipeline.robot if stage.per_robot else None
@@ -244,25 +261,34 @@ def _run_stage(
     replace = store.find(stage.name, robot, pipeline.motion, entry.key) is not None
     with store.writing(stage.name, robot, pipeline.motion, entry.key, replace=replace) as out:
         context = StageContext(
-            robot=robot, motion=pipeline.motion, params=entry.params, inputs=entry.inputs,
-            upstream={role: refs[role] for role in stage.requires}, out_dir=out, console=console,
-            work_dir=store.folder(stage.name, robot, pipeline.motion) / f".work-{entry.key}", resume=resume,
+            robot=robot,
+            motion=pipeline.motion,
+            params=entry.params,
+            inputs=entry.inputs,
+            upstream={role: refs[role] for role in stage.requires},
+            out_dir=out,
+            console=console,
+            work_dir=store.folder(stage.name, robot, pipeline.motion) / f".work-{entry.key}",
+            resume=resume,
         )
         metrics = stage.run(context)
-        write_manifest(out, {
-            "stage": stage.name,
-            "key": entry.key,
-            "robot": robot,
-            "motion": pipeline.motion,
-            "params": dataclasses.asdict(entry.params),
-            "inputs": {str(path): entry.input_hashes[label] for label, path in entry.inputs.items()},
-            "upstream": entry.upstream,
-            "code_version": code_version(),
-            "created_at": datetime.now(UTC).isoformat(timespec="seconds"),
-            "duration_s": round(time.perf_counter() - began, 3),
-            "metrics": metrics,
-            "files": file_records(out),
-        })
+        write_manifest(
+            out,
+            {
+                "stage": stage.name,
+                "key": entry.key,
+                "robot": robot,
+                "motion": pipeline.motion,
+                "params": dataclasses.asdict(entry.params),
+                "inputs": {str(path): entry.input_hashes[label] for label, path in entry.inputs.items()},
+                "upstream": entry.upstream,
+                "code_version": code_version(),
+                "created_at": datetime.now(UTC).isoformat(timespec="seconds"),
+                "duration_s": round(time.perf_counter() - began, 3),
+                "metrics": metrics,
+                "files": file_records(out),
+            },
+        )
     return ArtifactRef(stage.name, entry.key, store.folder(stage.name, robot, pipeline.motion) / entry.key)
 
 
@@ -275,7 +301,11 @@ def code_version() -> str:
     """`0.1.0+g<commit>` in a git checkout, else the package version."""
     try:
         commit = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"], cwd=paths.PROJECT_ROOT, capture_output=True, text=True, timeout=5,
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=paths.PROJECT_ROOT,
+            capture_output=True,
+            text=True,
+            timeout=5,
         ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         commit = ""

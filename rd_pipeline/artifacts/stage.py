@@ -65,8 +65,14 @@ class StageContext:
         if not self.console.is_terminal:
             yield _plain_progress(self.console, total, description)
             return
-        columns = (TextColumn("  {task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                   TimeElapsedColumn(), TimeRemainingColumn(), TextColumn("{task.fields[status]}"))
+        columns = (
+            TextColumn("  {task.description}"),
+            BarColumn(),
+            TextColumn("{task.completed}/{task.total}"),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            TextColumn("{task.fields[status]}"),
+        )
         with Progress(*columns, console=self.console, transient=True) as bar:
             task = bar.add_task(description, total=total, status="")
 
@@ -154,8 +160,9 @@ def _override(defaults: Any, values: dict[str, Any], prefix: str) -> Any:
         changes[name] = _coerce(f"{prefix}.{name}", value, default)
         choices = typing.get_args(hints[name]) if typing.get_origin(hints[name]) is typing.Literal else ()
         if choices and changes[name] not in choices:
-            raise PipelineError(f"parameter '{prefix}.{name}' must be one of {', '.join(map(str, choices))}, "
-                                f"got '{changes[name]}'")
+            raise PipelineError(
+                f"parameter '{prefix}.{name}' must be one of {', '.join(map(str, choices))}, got '{changes[name]}'"
+            )
     for name, group in nested.items():
         default = getattr(defaults, name)
         if not dataclasses.is_dataclass(default):

@@ -117,8 +117,9 @@ class ArtifactStore:
             raise
 
     @contextmanager
-    def locked(self, stage: str, robot: str | None, motion: str, key: str,
-               on_wait: Callable[[], None] = lambda: None) -> Iterator[None]:
+    def locked(
+        self, stage: str, robot: str | None, motion: str, key: str, on_wait: Callable[[], None] = lambda: None
+    ) -> Iterator[None]:
         """Hold the key's lock: a second run of the same key waits here (calling `on_wait` once)
         until the first has finished, then finds its artifact. The lock dies with its process."""
         folder = self.folder(stage, robot, motion)

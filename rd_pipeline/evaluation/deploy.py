@@ -36,12 +36,19 @@ def reference_baseline_spec(spec: PolicySpec) -> PolicySpec:
     observation = spec.get("observation")
     terms = [{**t, "size": len(joints)} if t["name"] == "last_action" else t for t in observation["terms"]]
     frame = sum(t["size"] for t in terms)
-    return PolicySpec({
-        **spec.data,
-        "action": {**spec.get("action"), "mode": "all", "outputs": joints, "semantics": ["residual"] * len(joints),
-                   "residual_mask": list(range(len(joints)))},
-        "observation": {**observation, "terms": terms, "frame_size": frame, "size": frame * observation["history"]},
-    })
+    return PolicySpec(
+        {
+            **spec.data,
+            "action": {
+                **spec.get("action"),
+                "mode": "all",
+                "outputs": joints,
+                "semantics": ["residual"] * len(joints),
+                "residual_mask": list(range(len(joints))),
+            },
+            "observation": {**observation, "terms": terms, "frame_size": frame, "size": frame * observation["history"]},
+        }
+    )
 
 
 class DeployController:
@@ -73,9 +80,12 @@ class DeployController:
 
     def _frame(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
         values = {
-            "joint_pos": qpos[:, self.qpos_idx] - self.default_policy, "joint_vel": qvel[:, self.dof_idx],
-            "projected_gravity": projected_gravity(qpos[:, 3:7]), "base_ang_vel": qvel[:, 3:6],
-            "last_action": self.last_action, "ref_joint_pos_next": self.reference_joints[self._next_frame()],
+            "joint_pos": qpos[:, self.qpos_idx] - self.default_policy,
+            "joint_vel": qvel[:, self.dof_idx],
+            "projected_gravity": projected_gravity(qpos[:, 3:7]),
+            "base_ang_vel": qvel[:, 3:6],
+            "last_action": self.last_action,
+            "ref_joint_pos_next": self.reference_joints[self._next_frame()],
         }
         return np.concatenate([t["scale"] * values[t["name"]] for t in self.terms], axis=-1)
 

@@ -28,7 +28,9 @@ def summarize(rollouts: list[Rollout], control_hz: float) -> dict[str, float | N
     for threshold in SUCCESS_THRESHOLDS_S:
         eligible = [r for r in rollouts if r.remaining_steps >= threshold * control_hz]
         out[f"success_{threshold}s_pct"] = (
-            round(100.0 * float(np.mean([r.steps >= threshold * control_hz for r in eligible])), 2) if eligible else None
+            round(100.0 * float(np.mean([r.steps >= threshold * control_hz for r in eligible])), 2)
+            if eligible
+            else None
         )
     for name in ERROR_METRICS:
         values = np.concatenate([r.errors[name] for r in rollouts])
@@ -50,7 +52,9 @@ def drift(rollouts: list[Rollout], rng: np.random.Generator, resamples: int = 10
             continue
         units = np.array([s.mean() for s in samples]) if len(samples) > 1 else samples[0]
         low, high = bootstrap_ci(units, rng, resamples)
-        out.append({"bin": b, "mean": round(float(units.mean()), 2), "ci_low": round(low, 2), "ci_high": round(high, 2)})
+        out.append(
+            {"bin": b, "mean": round(float(units.mean()), 2), "ci_low": round(low, 2), "ci_high": round(high, 2)}
+        )
     return out
 
 

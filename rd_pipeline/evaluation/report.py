@@ -25,47 +25,77 @@ def _cell(value: object, digits: int = 2) -> str:
     if isinstance(value, dict):  # a seed reduction
         if value.get("mean") is None:
             return "–"
-        return f"{value['mean']:.{digits}f}" + (f" ± {value['ci95']:.{digits}f}" if value.get("ci95") is not None else "")
+        return f"{value['mean']:.{digits}f}" + (
+            f" ± {value['ci95']:.{digits}f}" if value.get("ci95") is not None else ""
+        )
     return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
 
 
 def write_markdown(report: dict, out_dir: Path) -> None:
     """Tables shaped like the paper's: survival protocols, then tracking errors, then drift."""
-    lines = [f"# Sim2sim validation: {report['robot']} / {report['motion']}", "",
-             f"Policy `{report['policy_key']}` on reference `{report['reference']['key']}` frames "
-             f"{report['reference']['start_frame']}–{report['reference']['end_frame']} "
-             f"({report['reference']['duration_s']:.1f} s), nominal physics, deploy loop at "
-             f"{report['rates']['control_hz']:.0f} Hz policy / {report['rates']['physics_hz']:.0f} Hz physics.", "",
-             "## Survival", "",
-             "| controller | start-zero survival (s) | completion % | mean survival (s) | "
-             + " | ".join(f"success@{t}s %" for t in SUCCESS_THRESHOLDS_S) + " |",
-             "|---|---|---|---|" + "---|" * len(SUCCESS_THRESHOLDS_S)]
+    lines = [
+        f"# Sim2sim validation: {report['robot']} / {report['motion']}",
+        "",
+        f"Policy `{report['policy_key']}` on reference `{report['reference']['key']}` frames "
+        f"{report['reference']['start_frame']}–{report['reference']['end_frame']} "
+        f"({report['reference']['duration_s']:.1f} s), nominal physics, deploy loop at "
+        f"{report['rates']['control_hz']:.0f} Hz policy / {report['rates']['physics_hz']:.0f} Hz physics.",
+        "",
+        "## Survival",
+        "",
+        "| controller | start-zero survival (s) | completion % | mean survival (s) | "
+        + " | ".join(f"success@{t}s %" for t in SUCCESS_THRESHOLDS_S)
+        + " |",
+        "|---|---|---|---|" + "---|" * len(SUCCESS_THRESHOLDS_S),
+    ]
     for name in CONTROLLERS:
         grid, zero = report["nominal"][name]["fixed_grid"], report["nominal"][name]["start_zero"]
         cells = [_cell(zero["mean_survival_s"]), _cell(grid["completion_pct"]), _cell(grid["mean_survival_s"])]
         cells += [_cell(grid[f"success_{t}s_pct"]) for t in SUCCESS_THRESHOLDS_S]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    lines += ["", "## Tracking error (fixed grid, every step survived)", "",
-              "| controller | " + " | ".join(ERROR_METRICS) + " |", "|---|" + "---|" * len(ERROR_METRICS)]
+    lines += [
+        "",
+        "## Tracking error (fixed grid, every step survived)",
+        "",
+        "| controller | " + " | ".join(ERROR_METRICS) + " |",
+        "|---|" + "---|" * len(ERROR_METRICS),
+    ]
     for name in CONTROLLERS:
         grid = report["nominal"][name]["fixed_grid"]
         lines.append(f"| {name} | " + " | ".join(_cell(grid[m]) for m in ERROR_METRICS) + " |")
-    lines += ["", "Units: E_g_mpbpe, E_mpbpe mm; E_mpjpe mrad; E_mpjve mrad/s; E_mpbve mm/s.", "",
-              f"## Drift (E_g_mpbpe per relative time bin, mean and bootstrap 95% CI, {DRIFT_BINS} bins)", "",
-              "| controller | " + " | ".join(f"bin {b + 1}" for b in range(DRIFT_BINS)) + " |",
-              "|---|" + "---|" * DRIFT_BINS]
+    lines += [
+        "",
+        "Units: E_g_mpbpe, E_mpbpe mm; E_mpjpe mrad; E_mpjve mrad/s; E_mpbve mm/s.",
+        "",
+        f"## Drift (E_g_mpbpe per relative time bin, mean and bootstrap 95% CI, {DRIFT_BINS} bins)",
+        "",
+        "| controller | " + " | ".join(f"bin {b + 1}" for b in range(DRIFT_BINS)) + " |",
+        "|---|" + "---|" * DRIFT_BINS,
+    ]
     for name in CONTROLLERS:
         bins = report["nominal"][name]["drift"]
-        lines.append(f"| {name} | " + " | ".join(
-            "–" if b["mean"] is None else f"{b['mean']:.1f} [{b['ci_low']:.1f}, {b['ci_high']:.1f}]" for b in bins) + " |")
+        lines.append(
+            f"| {name} | "
+            + " | ".join(
+                "–" if b["mean"] is None else f"{b['mean']:.1f} [{b['ci_low']:.1f}, {b['ci_high']:.1f}]" for b in bins
+            )
+            + " |"
+        )
     randomized = report.get("randomized")
     if randomized:
-        lines += ["", f"## Randomized physics ({len(randomized['seeds'])} seeds, mean ± 95% Student-t CI)", "",
-                  "| controller | completion % | mean survival (s) | E_g_mpbpe | E_mpjpe |", "|---|---|---|---|---|"]
+        lines += [
+            "",
+            f"## Randomized physics ({len(randomized['seeds'])} seeds, mean ± 95% Student-t CI)",
+            "",
+            "| controller | completion % | mean survival (s) | E_g_mpbpe | E_mpjpe |",
+            "|---|---|---|---|---|",
+        ]
         for name in CONTROLLERS:
             row = randomized[name]
-            lines.append(f"| {name} | {_cell(row['completion_pct'])} | {_cell(row['mean_survival_s'])} | "
-                         f"{_cell(row['E_g_mpbpe'])} | {_cell(row['E_mpjpe'])} |")
+            lines.append(
+                f"| {name} | {_cell(row['completion_pct'])} | {_cell(row['mean_survival_s'])} | "
+                f"{_cell(row['E_g_mpbpe'])} | {_cell(row['E_mpjpe'])} |"
+            )
     (out_dir / REPORT_MD).write_text("\n".join(lines) + "\n")
 
 

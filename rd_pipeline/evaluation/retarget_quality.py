@@ -65,7 +65,8 @@ class FootMeshes:
         for body in robot.config.foot_bodies:
             body_id = robot.body_ids[body]
             geoms = [
-                g for g in range(model.ngeom)
+                g
+                for g in range(model.ngeom)
                 if model.geom_bodyid[g] == body_id and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH
             ]
             if not geoms:

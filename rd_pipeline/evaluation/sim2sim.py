@@ -64,8 +64,15 @@ class Rollout:
     """(steps + 1, nbody, 4) wxyz (first rollout only)."""
 
 
-def run_rollouts(spec: PolicySpec, models: list[mujoco.MjModel], reference: ReferenceMotion, policy: Policy,
-                 start_frames: np.ndarray, bodies: BodySets, protocol: Protocol) -> list[Rollout]:
+def run_rollouts(
+    spec: PolicySpec,
+    models: list[mujoco.MjModel],
+    reference: ReferenceMotion,
+    policy: Policy,
+    start_frames: np.ndarray,
+    bodies: BodySets,
+    protocol: Protocol,
+) -> list[Rollout]:
     """Roll out `policy` from each start frame (rollout k on `models[k]`), all in one batched loop;
     the first rollout also keeps its body poses for the recording."""
     count, dt = len(start_frames), 1.0 / spec.get("rates.control_hz")
@@ -121,18 +128,29 @@ def run_rollouts(spec: PolicySpec, models: list[mujoco.MjModel], reference: Refe
         ref_rel = ref_pos - reference.body_pos_w[frame][:, root_ref : root_ref + 1]
         velocity = (pos - previous_pos) / dt
         previous_pos = pos
-        errors.append({
-            "E_g_mpbpe": 1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean(-1),
-            "E_mpbpe": 1000 * np.linalg.norm(rel - ref_rel, axis=-1).mean(-1),
-            "E_mpjpe": 1000 * np.abs(qpos[:, controller.qpos_idx] - reference.joint_pos[frame][:, ref_joint]).mean(-1),
-            "E_mpjve": 1000 * np.abs(qvel[:, controller.dof_idx] - reference.joint_vel[frame][:, ref_joint]).mean(-1),
-            "E_mpbve": 1000 * np.linalg.norm(velocity - reference.body_lin_vel_w[frame][:, tracked_ref], axis=-1).mean(-1),
-        })
+        errors.append(
+            {
+                "E_g_mpbpe": 1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean(-1),
+                "E_mpbpe": 1000 * np.linalg.norm(rel - ref_rel, axis=-1).mean(-1),
+                "E_mpjpe": 1000
+                * np.abs(qpos[:, controller.qpos_idx] - reference.joint_pos[frame][:, ref_joint]).mean(-1),
+                "E_mpjve": 1000
+                * np.abs(qvel[:, controller.dof_idx] - reference.joint_vel[frame][:, ref_joint]).mean(-1),
+                "E_mpbve": 1000
+                * np.linalg.norm(velocity - reference.body_lin_vel_w[frame][:, tracked_ref], axis=-1).mean(-1),
+            }
+        )
         poses.append((xpos[0], xquat[0]))
-        tilted = bad_orientation(torch.from_numpy(xquat[:, root]),
-                                 torch.from_numpy(reference.body_quat_w[frame, root_ref]), protocol.orientation_limit_rad)
-        far = motion_far(torch.from_numpy(xpos[:, term]), torch.from_numpy(reference.body_pos_w[frame][:, term_ref]),
-                         protocol.motion_far_m)
+        tilted = bad_orientation(
+            torch.from_numpy(xquat[:, root]),
+            torch.from_numpy(reference.body_quat_w[frame, root_ref]),
+            protocol.orientation_limit_rad,
+        )
+        far = motion_far(
+            torch.from_numpy(xpos[:, term]),
+            torch.from_numpy(reference.body_pos_w[frame][:, term_ref]),
+            protocol.motion_far_m,
+        )
         touching = np.array([_bad_contact(m, d, floor, allowed) for m, d in zip(models, physics.datas)])
         failed = tilted.numpy() | far.numpy() | touching
         steps += alive
@@ -142,13 +160,17 @@ def run_rollouts(spec: PolicySpec, models: list[mujoco.MjModel], reference: Refe
     out = []
     for k in range(count):
         n = int(steps[k])
-        out.append(Rollout(
-            start_frame=int(start_frames[k]), steps=n, completed=not terminated[k],
-            remaining_steps=int(last - start_frames[k]),
-            errors={name: np.array([e[name][k] for e in errors[:n]]) for name in errors[0]},
-            body_pos=np.stack([p[0] for p in poses[: n + 1]]) if k == 0 else None,
-            body_quat=np.stack([p[1] for p in poses[: n + 1]]) if k == 0 else None,
-        ))
+        out.append(
+            Rollout(
+                start_frame=int(start_frames[k]),
+                steps=n,
+                completed=not terminated[k],
+                remaining_steps=int(last - start_frames[k]),
+                errors={name: np.array([e[name][k] for e in errors[:n]]) for name in errors[0]},
+                body_pos=np.stack([p[0] for p in poses[: n + 1]]) if k == 0 else None,
+                body_quat=np.stack([p[1] for p in poses[: n + 1]]) if k == 0 else None,
+            )
+        )
     physics.close()
     return out
 
@@ -163,8 +185,9 @@ def _bad_contact(model: mujoco.MjModel, data: mujoco.MjData, floor: list[int], a
     return False
 
 
-def randomized_models(model: mujoco.MjModel, count: int, rng: np.random.Generator,
-                      ranges: Randomization = Randomization()) -> list[mujoco.MjModel]:
+def randomized_models(
+    model: mujoco.MjModel, count: int, rng: np.random.Generator, ranges: Randomization = Randomization()
+) -> list[mujoco.MjModel]:
     """`count` copies of `model` with the training ranges of link mass, ground friction and PD gains
     drawn per copy: the optional randomized evaluation."""
     out = []

@@ -21,8 +21,16 @@ from rd_pipeline.robots import Robot
 def load_actor(checkpoint: Path, observation_size: int, num_actions: int, hidden_dims: list[int]) -> MLPModel:
     """The training actor (rsl-rl `MLPModel`) with the checkpoint's weights, in eval mode."""
     obs = TensorDict({"policy": torch.zeros(1, observation_size)}, batch_size=[1])
-    actor = MLPModel(obs, {"actor": ["policy"]}, "actor", num_actions, hidden_dims, "relu", obs_normalization=True,
-                     distribution_cfg={"class_name": "GaussianDistribution", "init_std": 1.0})
+    actor = MLPModel(
+        obs,
+        {"actor": ["policy"]},
+        "actor",
+        num_actions,
+        hidden_dims,
+        "relu",
+        obs_normalization=True,
+        distribution_cfg={"class_name": "GaussianDistribution", "init_std": 1.0},
+    )
     state = torch.load(checkpoint, weights_only=False, map_location="cpu")["algorithm"]["actor_state_dict"]
     actor.load_state_dict(state, strict=True)
     return actor.eval()
@@ -33,8 +41,9 @@ def script_actor(actor: MLPModel) -> torch.jit.ScriptModule:
     return torch.jit.script(actor.as_jit().cpu().eval())
 
 
-def build_policy_spec(robot: Robot, env: dict, num_actions: int, reference_stage: str, reference_key: str,
-                      clip_frames: tuple[int, int]) -> PolicySpec:
+def build_policy_spec(
+    robot: Robot, env: dict, num_actions: int, reference_stage: str, reference_key: str, clip_frames: tuple[int, int]
+) -> PolicySpec:
     """`policy.json` from the robot config and the training run's environment params (as in its manifest)."""
     config = robot.config
     policy = [config.joint_names[i] for i in config.policy_indices]
@@ -46,25 +55,43 @@ def build_policy_spec(robot: Robot, env: dict, num_actions: int, reference_stage
         raise ValueError(f"the checkpoint's actor has {num_actions} outputs, the action mode implies {len(outputs)}")
     terms = actor_terms(len(policy), num_actions, ObservationsCfg(**env["observations"]))
     floats = lambda values: [float(v) for v in values]
-    return PolicySpec({
-        "format_version": FORMAT_VERSION, "robot": config.name, "mjcf": config.mjcf,
-        "joints": {
-            "actuated": list(config.joint_names), "policy": policy,
-            "kp": floats(config.kp), "kd": floats(config.kd), "effort_limit": floats(config.effort_limit),
-            "default_pos": floats(config.default_pos),
-            "policy_lower": floats(lower), "policy_upper": floats(upper),
-        },
-        "action": {
-            "mode": actions["mode"], "scale": float(actions["scale"]), "clip": float(actions["clip"]),
-            "residual_mask": [i for i, kind in enumerate(semantics) if kind == "residual"], "outputs": outputs,
-            "semantics": list(semantics),
-            "formula": "per policy joint: base = the reference at the next control step where semantics is "
-                       "'residual' or 'reference', default_pos where it is 'absolute'; targets[outputs] += "
-                       "scale * clip(action, -clip, clip); targets projected to [policy_lower, policy_upper]; "
-                       "actuated joints outside the policy hold default_pos",
-        },
-        "observation": layout_json(terms, int(env["history"])),
-        "rates": {"control_hz": 1.0 / (env["physics_dt"] * env["decimation"]), "physics_hz": 1.0 / env["physics_dt"]},
-        "reference": {"stage": reference_stage, "key": reference_key, "start_frame": int(clip_frames[0]),
-                      "end_frame": int(clip_frames[1])},
-    })
+    return PolicySpec(
+        {
+            "format_version": FORMAT_VERSION,
+            "robot": config.name,
+            "mjcf": config.mjcf,
+            "joints": {
+                "actuated": list(config.joint_names),
+                "policy": policy,
+                "kp": floats(config.kp),
+                "kd": floats(config.kd),
+                "effort_limit": floats(config.effort_limit),
+                "default_pos": floats(config.default_pos),
+                "policy_lower": floats(lower),
+                "policy_upper": floats(upper),
+            },
+            "action": {
+                "mode": actions["mode"],
+                "scale": float(actions["scale"]),
+                "clip": float(actions["clip"]),
+                "residual_mask": [i for i, kind in enumerate(semantics) if kind == "residual"],
+                "outputs": outputs,
+                "semantics": list(semantics),
+                "formula": "per policy joint: base = the reference at the next control step where semantics is "
+                "'residual' or 'reference', default_pos where it is 'absolute'; targets[outputs] += "
+                "scale * clip(action, -clip, clip); targets projected to [policy_lower, policy_upper]; "
+                "actuated joints outside the policy hold default_pos",
+            },
+            "observation": layout_json(terms, int(env["history"])),
+            "rates": {
+                "control_hz": 1.0 / (env["physics_dt"] * env["decimation"]),
+                "physics_hz": 1.0 / env["physics_dt"],
+            },
+            "reference": {
+                "stage": reference_stage,
+                "key": reference_key,
+                "start_frame": int(clip_frames[0]),
+                "end_frame": int(clip_frames[1]),
+            },
+        }
+    )

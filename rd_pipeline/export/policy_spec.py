@@ -21,16 +21,34 @@ SPEC_FILE = "policy.json"
 _NUMBER = (int, float)
 # Dotted field -> expected type; lists are checked element-wise and per-joint lists for their length.
 SCHEMA: dict[str, Any] = {
-    "format_version": int, "robot": str, "mjcf": str,
-    "joints.actuated": [str], "joints.policy": [str],
-    "joints.kp": [_NUMBER], "joints.kd": [_NUMBER], "joints.effort_limit": [_NUMBER], "joints.default_pos": [_NUMBER],
-    "joints.policy_lower": [_NUMBER], "joints.policy_upper": [_NUMBER],
-    "action.mode": str, "action.scale": _NUMBER, "action.clip": _NUMBER, "action.residual_mask": [int],
-    "action.outputs": [str], "action.semantics": [str],
-    "observation.history": int, "observation.frame_size": int, "observation.size": int, "observation.order": str,
+    "format_version": int,
+    "robot": str,
+    "mjcf": str,
+    "joints.actuated": [str],
+    "joints.policy": [str],
+    "joints.kp": [_NUMBER],
+    "joints.kd": [_NUMBER],
+    "joints.effort_limit": [_NUMBER],
+    "joints.default_pos": [_NUMBER],
+    "joints.policy_lower": [_NUMBER],
+    "joints.policy_upper": [_NUMBER],
+    "action.mode": str,
+    "action.scale": _NUMBER,
+    "action.clip": _NUMBER,
+    "action.residual_mask": [int],
+    "action.outputs": [str],
+    "action.semantics": [str],
+    "observation.history": int,
+    "observation.frame_size": int,
+    "observation.size": int,
+    "observation.order": str,
     "observation.terms": [dict],
-    "rates.control_hz": _NUMBER, "rates.physics_hz": _NUMBER,
-    "reference.stage": str, "reference.key": str, "reference.start_frame": int, "reference.end_frame": int,
+    "rates.control_hz": _NUMBER,
+    "rates.physics_hz": _NUMBER,
+    "reference.stage": str,
+    "reference.key": str,
+    "reference.start_frame": int,
+    "reference.end_frame": int,
 }
 _PER_ACTUATED = ("joints.kp", "joints.kd", "joints.effort_limit", "joints.default_pos")
 _PER_POLICY = ("joints.policy_lower", "joints.policy_upper")
@@ -70,7 +88,9 @@ def _check(data: Any, source: Path) -> None:
             value = value[part]
         element = kind[0] if isinstance(kind, list) else None
         if element is not None:
-            if not isinstance(value, list) or not all(isinstance(v, element) and not isinstance(v, bool) for v in value):
+            if not isinstance(value, list) or not all(
+                isinstance(v, element) and not isinstance(v, bool) for v in value
+            ):
                 raise PipelineError(f"{source}: field '{dotted}' must be a list of {_name(element)}")
         elif not isinstance(value, kind) or isinstance(value, bool):
             raise PipelineError(f"{source}: field '{dotted}' must be {_name(kind)}, got {value!r}")
@@ -80,25 +100,34 @@ def _check(data: Any, source: Path) -> None:
     for dotted in _PER_ACTUATED + _PER_POLICY:
         expected = len(joints["actuated"] if dotted in _PER_ACTUATED else joints["policy"])
         if len(joints[dotted.split(".")[1]]) != expected:
-            raise PipelineError(f"{source}: field '{dotted}' has {len(joints[dotted.split('.')[1]])} values, expected {expected}")
+            raise PipelineError(
+                f"{source}: field '{dotted}' has {len(joints[dotted.split('.')[1]])} values, expected {expected}"
+            )
     action = data["action"]
     if len(action["semantics"]) != len(joints["policy"]):
-        raise PipelineError(f"{source}: field 'action.semantics' has {len(action['semantics'])} values, "
-                            f"expected {len(joints['policy'])}")
+        raise PipelineError(
+            f"{source}: field 'action.semantics' has {len(action['semantics'])} values, "
+            f"expected {len(joints['policy'])}"
+        )
     for kind in action["semantics"]:
         if kind not in SEMANTICS:
             raise PipelineError(f"{source}: field 'action.semantics' has '{kind}' (allowed: {', '.join(SEMANTICS)})")
     driven = [joint for joint, kind in zip(joints["policy"], action["semantics"]) if kind != "reference"]
     if action["outputs"] != driven:
-        raise PipelineError(f"{source}: field 'action.outputs' must list the policy joints whose semantics "
-                            "is not 'reference', in policy order")
+        raise PipelineError(
+            f"{source}: field 'action.outputs' must list the policy joints whose semantics "
+            "is not 'reference', in policy order"
+        )
     terms = data["observation"]["terms"]
     for i, term in enumerate(terms):
         for name, kind in (("name", str), ("size", int), ("scale", _NUMBER)):
             if not isinstance(term.get(name), kind):
                 raise PipelineError(f"{source}: field 'observation.terms[{i}].{name}' is missing or not {_name(kind)}")
     frame = sum(t["size"] for t in terms)
-    if frame != data["observation"]["frame_size"] or frame * data["observation"]["history"] != data["observation"]["size"]:
+    if (
+        frame != data["observation"]["frame_size"]
+        or frame * data["observation"]["history"] != data["observation"]["size"]
+    ):
         raise PipelineError(f"{source}: field 'observation.size' does not match its terms and history")
 
 

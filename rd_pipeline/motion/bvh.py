@@ -154,9 +154,9 @@ class _Parser:
         if not line.strip().startswith(label):
             raise self.fail(f"expected '{label}', got '{line.strip()}'")
         try:
-            return kind(line.strip()[len(label):].strip())
+            return kind(line.strip()[len(label) :].strip())
         except ValueError:
-            raise self.fail(f"'{label}' needs a number, got '{line.strip()[len(label):].strip()}'") from None
+            raise self.fail(f"'{label}' needs a number, got '{line.strip()[len(label) :].strip()}'") from None
 
     def numbers(self, tokens: list[str], line: int) -> np.ndarray:
         try:
@@ -185,7 +185,9 @@ class _Parser:
             )
             n_frames = len(rows)
         if len(rows) < n_frames:
-            raise self.fail(f"truncated: Frames says {n_frames} but the file has {len(rows)} motion lines", first + len(rows))
+            raise self.fail(
+                f"truncated: Frames says {n_frames} but the file has {len(rows)} motion lines", first + len(rows)
+            )
         if len(rows) > n_frames:
             raise self.fail(f"{len(rows) - n_frames} motion lines beyond Frames: {n_frames}", first + n_frames + 1)
         flat = [token for row in rows for token in row]

@@ -43,16 +43,25 @@ class HumanMotion:
 
     def save(self, path: Path) -> None:
         np.savez(
-            path, fps=self.fps, names=np.array(self.names), parents=self.parents,
-            offsets=self.offsets, pos_w=self.pos_w, quat_w=self.quat_w,
+            path,
+            fps=self.fps,
+            names=np.array(self.names),
+            parents=self.parents,
+            offsets=self.offsets,
+            pos_w=self.pos_w,
+            quat_w=self.quat_w,
         )
 
     @classmethod
     def load(cls, path: Path) -> HumanMotion:
         with open_npz(path) as data:
             return cls(
-                fps=float(data["fps"]), names=tuple(str(n) for n in data["names"]), parents=data["parents"],
-                offsets=data["offsets"], pos_w=data["pos_w"], quat_w=data["quat_w"],
+                fps=float(data["fps"]),
+                names=tuple(str(n) for n in data["names"]),
+                parents=data["parents"],
+                offsets=data["offsets"],
+                pos_w=data["pos_w"],
+                quat_w=data["quat_w"],
             )
 
 
@@ -65,6 +74,10 @@ def human_motion_from_bvh(clip: BvhClip, length_unit_m: float, up_axis_change: n
     quat_w = quat_xyzw[:, [3, 0, 1, 2]].reshape(*rot_w.shape[:2], 4)
     offsets = np.array([j.offset for j in clip.joints]) * length_unit_m
     return HumanMotion(
-        fps=1.0 / clip.frame_time, names=tuple(clip.names), parents=clip.parents,
-        offsets=offsets, pos_w=pos_w, quat_w=quat_w,
+        fps=1.0 / clip.frame_time,
+        names=tuple(clip.names),
+        parents=clip.parents,
+        offsets=offsets,
+        pos_w=pos_w,
+        quat_w=quat_w,
     )

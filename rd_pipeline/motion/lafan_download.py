@@ -14,7 +14,9 @@ from rich.progress import DownloadColumn, Progress, TransferSpeedColumn
 from rd_pipeline.artifacts.keys import file_sha256
 from rd_pipeline.errors import PipelineError
 
-LAFAN_URL = "https://media.githubusercontent.com/media/ubisoft/ubisoft-laforge-animation-dataset/master/lafan1/lafan1.zip"
+LAFAN_URL = (
+    "https://media.githubusercontent.com/media/ubisoft/ubisoft-laforge-animation-dataset/master/lafan1/lafan1.zip"
+)
 LAFAN_SHA256 = "ea918082b500a5d158e9d3aa39039df04cd42e25f5c02fe8f7e88e8e9365a977"
 LAFAN_BYTES = 144_051_503
 
@@ -47,7 +49,9 @@ def _download(console: Console) -> Path:
     destination = Path(tempfile.gettempdir()) / "lafan1.zip"
     try:
         with urllib.request.urlopen(LAFAN_URL, timeout=30) as response, destination.open("wb") as handle:
-            with Progress(*Progress.get_default_columns(), DownloadColumn(), TransferSpeedColumn(), console=console) as bar:
+            with Progress(
+                *Progress.get_default_columns(), DownloadColumn(), TransferSpeedColumn(), console=console
+            ) as bar:
                 task = bar.add_task("lafan1.zip", total=LAFAN_BYTES)
                 for block in iter(lambda: response.read(1 << 20), b""):
                     handle.write(block)

@@ -56,8 +56,11 @@ class ReferenceMotion:
 
     def frames(self, start: int, end: int) -> ReferenceMotion:
         """Frames [start, end) of this motion (a training clip)."""
-        per_frame = {f.name: getattr(self, f.name)[start:end] for f in fields(self)
-                     if f.name not in ("fps", "joint_names", "body_names")}
+        per_frame = {
+            f.name: getattr(self, f.name)[start:end]
+            for f in fields(self)
+            if f.name not in ("fps", "joint_names", "body_names")
+        }
         return replace(self, **per_frame)
 
     def save(self, path: Path) -> None:
@@ -80,7 +83,11 @@ class ReferenceMotion:
 
 
 def reference_from_joint_trajectory(
-    robot: Robot, fps: float, root_pos: np.ndarray, root_quat: np.ndarray, joint_pos: np.ndarray,
+    robot: Robot,
+    fps: float,
+    root_pos: np.ndarray,
+    root_quat: np.ndarray,
+    joint_pos: np.ndarray,
     foot_contact: np.ndarray,
 ) -> ReferenceMotion:
     """Complete a joint-space trajectory with body poses (MuJoCo FK) and finite-difference velocities."""

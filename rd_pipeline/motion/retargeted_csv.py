@@ -54,7 +54,11 @@ def read_retargeted_csv(path: Path, n_joints: int) -> np.ndarray:
 
 
 def import_retargeted_csv(
-    path: Path, robot: Robot, source_fps: float, target_fps: float, interpolation: str,
+    path: Path,
+    robot: Robot,
+    source_fps: float,
+    target_fps: float,
+    interpolation: str,
     contact: ContactThresholds,
 ) -> CsvImportResult:
     """Map dataset columns onto the robot by joint name, resample to `target_fps`, complete by FK."""

@@ -11,7 +11,11 @@ from rd_pipeline.retarget.smoothing import smoothstep
 
 
 def label_body_contacts(
-    human_pos: np.ndarray, index: dict[str, int], joints: list[str], fps: float, settings: BodyContactSettings,
+    human_pos: np.ndarray,
+    index: dict[str, int],
+    joints: list[str],
+    fps: float,
+    settings: BodyContactSettings,
 ) -> np.ndarray:
     """(T, K) which of `joints` rest on the floor (z = 0 in LAFAN1), from each joint's height and speed.
 

@@ -15,9 +15,19 @@ from rd_pipeline.robots import Robot
 
 
 def plant_foot(
-    free: np.ndarray, forward: np.ndarray, human_rotation: np.ndarray, contact: np.ndarray, sole_vertices: np.ndarray,
-    fps: float, clearance: float, lift_time_s: float, pelvis_yaw: np.ndarray, yaw_range: tuple[float, float],
-    tilt_limit: float, drift: PlantDrift, human_path: np.ndarray,
+    free: np.ndarray,
+    forward: np.ndarray,
+    human_rotation: np.ndarray,
+    contact: np.ndarray,
+    sole_vertices: np.ndarray,
+    fps: float,
+    clearance: float,
+    lift_time_s: float,
+    pelvis_yaw: np.ndarray,
+    yaw_range: tuple[float, float],
+    tilt_limit: float,
+    drift: PlantDrift,
+    human_path: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Foot targets: fixed and flat while planted; in swing, the human path bent to meet the plants.
     Returns positions, rotations, the height the sole clears the floor by (0 while planted) and
@@ -107,7 +117,11 @@ def plant_foot(
 
 
 def _split_drifting_plants(
-    contact: np.ndarray, free: np.ndarray, path: np.ndarray, drift: PlantDrift, gap: int,
+    contact: np.ndarray,
+    free: np.ndarray,
+    path: np.ndarray,
+    drift: PlantDrift,
+    gap: int,
 ) -> np.ndarray:
     """Contact with a swing of 2 x `gap` frames cut into every plant the foot drifts out of.
 
@@ -123,7 +137,7 @@ def _split_drifting_plants(
             drifted = np.linalg.norm(free[t, :2] - anchor) > drift.target_m
             moved = np.linalg.norm(path[t, :2] - human) > drift.human_m
             if drifted and moved and t - gap > start and t + gap < end:
-                contact[t - gap:t + gap] = False
+                contact[t - gap : t + gap] = False
                 anchor = free[t + gap, :2]
                 human = path[t + gap, :2]
                 start = t + gap

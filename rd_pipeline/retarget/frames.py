@@ -29,4 +29,6 @@ def yaw_pitch_frame(yaw: np.ndarray, pitch: np.ndarray) -> np.ndarray:
 
 def yaw_and_pitch(forward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Heading and elevation (rad) of direction vectors (..., 3)."""
-    return np.arctan2(forward[..., 1], forward[..., 0]), np.arctan2(forward[..., 2], np.linalg.norm(forward[..., :2], axis=-1))
+    return np.arctan2(forward[..., 1], forward[..., 0]), np.arctan2(
+        forward[..., 2], np.linalg.norm(forward[..., :2], axis=-1)
+    )

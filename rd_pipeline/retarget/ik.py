@@ -24,7 +24,12 @@ class RetargetIk:
     """One mink problem reused for every frame."""
 
     def __init__(
-        self, robot: Robot, targets: RetargetTargets, weights: IkWeights, settings: IkSettings, hulls: BodyHulls,
+        self,
+        robot: Robot,
+        targets: RetargetTargets,
+        weights: IkWeights,
+        settings: IkSettings,
+        hulls: BodyHulls,
     ) -> None:
         self.robot = robot
         self.targets = targets
@@ -44,9 +49,15 @@ class RetargetIk:
                 orientation_cost = weights.torso_orientation
             else:
                 orientation_cost = 0.0
-            self.frame_tasks.append(mink.FrameTask(
-                body, "body", position_cost=1.0, orientation_cost=orientation_cost, lm_damping=settings.lm_damping,
-            ))
+            self.frame_tasks.append(
+                mink.FrameTask(
+                    body,
+                    "body",
+                    position_cost=1.0,
+                    orientation_cost=orientation_cost,
+                    lm_damping=settings.lm_damping,
+                )
+            )
         self.position_costs = _position_cost_schedule(targets, config, weights)
         self.posture = mink.PostureTask(model, cost=weights.posture)
         q_default = self.configuration.q.copy()
@@ -54,7 +65,11 @@ class RetargetIk:
         self.posture.set_target(q_default)
         frame_period = 1.0 / targets.fps
         self.step_limit = FrameStepLimit(
-            robot.dof_indices, robot.joint_range[:, 0], robot.joint_range[:, 1], robot.qpos_indices, model.nv,
+            robot.dof_indices,
+            robot.joint_range[:, 0],
+            robot.joint_range[:, 1],
+            robot.qpos_indices,
+            model.nv,
             config.velocity_limit * frame_period * settings.velocity_margin,
         )
         self.root_steps = _root_step_budget(targets, config.root_body, settings)
@@ -72,10 +87,14 @@ class RetargetIk:
         self.pair_reach = model.geom_rbound[self.collision_pairs].sum(axis=1)
         self.limits: list[mink.Limit] = [self.step_limit, self.floor]
         if pairs:
-            self.limits.append(mink.CollisionAvoidanceLimit(
-                model, pairs, minimum_distance_from_collisions=settings.collision_margin_m,
-                collision_detection_distance=settings.collision_detection_m,
-            ))
+            self.limits.append(
+                mink.CollisionAvoidanceLimit(
+                    model,
+                    pairs,
+                    minimum_distance_from_collisions=settings.collision_margin_m,
+                    collision_detection_distance=settings.collision_detection_m,
+                )
+            )
         self.tasks = [*self.frame_tasks, self.posture]
         self.damping = weights.damping
         self.key_body_ids = np.array([robot.body_ids[b] for b in targets.bodies])
@@ -107,7 +126,9 @@ class RetargetIk:
         for task, body in zip(self.frame_tasks, targets.bodies):
             rotation = targets.orientations.get(body)
             so3 = mink.SO3.from_matrix(rotation[t]) if rotation is not None else mink.SO3.identity()
-            task.set_target(mink.SE3.from_rotation_and_translation(so3, targets.positions[t, targets.bodies.index(body)]))
+            task.set_target(
+                mink.SE3.from_rotation_and_translation(so3, targets.positions[t, targets.bodies.index(body)])
+            )
 
     def refine_feet(self, smoothed: np.ndarray, frames: Iterable[int]) -> np.ndarray:
         """Put the feet of a smoothed trajectory back on their targets, moving the legs only.
@@ -176,13 +197,23 @@ class RetargetIk:
         bounds, take the step that only stops the sinking."""
         try:
             return mink.solve_ik(
-                self.configuration, tasks, 1.0, self.settings.solver, damping=self.damping, limits=self.limits,
+                self.configuration,
+                tasks,
+                1.0,
+                self.settings.solver,
+                damping=self.damping,
+                limits=self.limits,
             )
         except mink.NoSolutionFound:
             self.floor.relaxed = True
             try:
                 return mink.solve_ik(
-                    self.configuration, tasks, 1.0, self.settings.solver, damping=self.damping, limits=self.limits,
+                    self.configuration,
+                    tasks,
+                    1.0,
+                    self.settings.solver,
+                    damping=self.damping,
+                    limits=self.limits,
                 )
             finally:
                 self.floor.relaxed = False

@@ -26,7 +26,11 @@ def match_stance_width(targets: dict[str, np.ndarray], rest: dict[str, np.ndarra
 
 
 def keep_feet_apart(
-    targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], pelvis: np.ndarray, fps: float, fraction: float,
+    targets: dict[str, np.ndarray],
+    rest: dict[str, np.ndarray],
+    pelvis: np.ndarray,
+    fps: float,
+    fraction: float,
 ) -> None:
     """Push the legs apart where the feet come horizontally closer than `fraction` of the robot's rest
     stance: a human crosses and passes legs closer than a robot's thick knees and feet can.
@@ -51,7 +55,10 @@ def keep_feet_apart(
 
 
 def keep_legs_reachable(
-    targets: dict[str, np.ndarray], rest: dict[str, np.ndarray], fps: float, fraction: float,
+    targets: dict[str, np.ndarray],
+    rest: dict[str, np.ndarray],
+    fps: float,
+    fraction: float,
 ) -> None:
     """Lower the body (not the feet) where a planted foot would need a leg longer than the robot's.
 

@@ -14,8 +14,15 @@ class FrameStepLimit(mink.Limit):
     finite-difference velocity of the output obey the limits by construction.
     """
 
-    def __init__(self, dof_indices: np.ndarray, lower: np.ndarray, upper: np.ndarray, qpos_indices: np.ndarray,
-                 nv: int, max_step: np.ndarray) -> None:
+    def __init__(
+        self,
+        dof_indices: np.ndarray,
+        lower: np.ndarray,
+        upper: np.ndarray,
+        qpos_indices: np.ndarray,
+        nv: int,
+        max_step: np.ndarray,
+    ) -> None:
         self.dof_indices, self.qpos_indices = dof_indices, qpos_indices
         self.range_lower, self.range_upper, self.max_step = lower, upper, max_step
         self.lower, self.upper = lower.copy(), upper.copy()

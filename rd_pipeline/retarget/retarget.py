@@ -34,8 +34,14 @@ class RetargetResult:
 
 
 def retarget(
-    human: HumanMotion, robot: Robot, fps: float, contact: ContactThresholds, shape: TargetShaping,
-    body_contact: BodyContactSettings, weights: IkWeights, settings: IkSettings,
+    human: HumanMotion,
+    robot: Robot,
+    fps: float,
+    contact: ContactThresholds,
+    shape: TargetShaping,
+    body_contact: BodyContactSettings,
+    weights: IkWeights,
+    settings: IkSettings,
     track: Callable[[Iterable[int], int], Iterable[int]] = lambda frames, total: frames,
 ) -> RetargetResult:
     """Retarget `human` onto `robot` at `fps`; `track` wraps the frame loops (progress bars).
@@ -88,6 +94,10 @@ def _smooth_trajectory(robot: Robot, qpos: np.ndarray, sigma: float) -> np.ndarr
 
 def _reference(robot: Robot, qpos: np.ndarray, targets: RetargetTargets) -> ReferenceMotion:
     return reference_from_joint_trajectory(
-        robot, targets.fps, qpos[:, :3].copy(), qpos[:, 3:7].copy(), qpos[:, robot.qpos_indices].copy(),
+        robot,
+        targets.fps,
+        qpos[:, :3].copy(),
+        qpos[:, 3:7].copy(),
+        qpos[:, robot.qpos_indices].copy(),
         targets.foot_contact,
     )

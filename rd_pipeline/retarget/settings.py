@@ -44,11 +44,17 @@ class BodyContactSettings:
     """When a human knee, elbow, hand, pelvis or torso rests on the floor (LAFAN1's floor is z = 0)."""
 
     limb: ContactThresholds = ContactThresholds(
-        enter_height_m=0.10, enter_speed_m_s=0.3, exit_height_m=0.14, exit_speed_m_s=0.6,
+        enter_height_m=0.10,
+        enter_speed_m_s=0.3,
+        exit_height_m=0.14,
+        exit_speed_m_s=0.6,
     )
     """When a limb joint (knee, elbow, wrist) lands on the floor and leaves it (rolling, sliding)."""
     trunk: ContactThresholds = ContactThresholds(
-        enter_height_m=0.20, enter_speed_m_s=0.3, exit_height_m=0.24, exit_speed_m_s=0.6,
+        enter_height_m=0.20,
+        enter_speed_m_s=0.3,
+        exit_height_m=0.24,
+        exit_speed_m_s=0.6,
     )
     """The same for a trunk joint (`trunk_joints`), which sits deeper inside the body."""
     trunk_joints: tuple[str, ...] = ("Hips", "Spine2")

@@ -59,8 +59,16 @@ class RetargetTargets:
 
     def save(self, path) -> None:
         """Keypoint targets for viewing beside the robot (the orientations are not needed there)."""
-        np.savez(path, fps=self.fps, bodies=np.array(self.bodies), human_joints=np.array(self.human_joints),
-                 positions=self.positions, foot_contact=self.foot_contact, body_contact=self.body_contact, human_pelvis=self.human_pelvis)
+        np.savez(
+            path,
+            fps=self.fps,
+            bodies=np.array(self.bodies),
+            human_joints=np.array(self.human_joints),
+            positions=self.positions,
+            foot_contact=self.foot_contact,
+            body_contact=self.body_contact,
+            human_pelvis=self.human_pelvis,
+        )
 
 
 def resample_human(human: HumanMotion, fps: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -97,8 +105,13 @@ def robot_rest_rotation(robot: Robot, body: str) -> np.ndarray:
 
 
 def build_targets(
-    human: HumanMotion, robot: Robot, fps: float, foot_vertices: tuple[np.ndarray, np.ndarray], contact: ContactThresholds,
-    shape: TargetShaping = TargetShaping(), body_contact: BodyContactSettings = BodyContactSettings(),
+    human: HumanMotion,
+    robot: Robot,
+    fps: float,
+    foot_vertices: tuple[np.ndarray, np.ndarray],
+    contact: ContactThresholds,
+    shape: TargetShaping = TargetShaping(),
+    body_contact: BodyContactSettings = BodyContactSettings(),
 ) -> RetargetTargets:
     config = robot.config
     sole_height = np.array([-vertices[:, 2].min() for vertices in foot_vertices])
@@ -122,7 +135,9 @@ def build_targets(
     # the torso) keep the robot's own offset, turned by the parent's target orientation; limbs
     # (knees, feet, elbows, hands) follow the human direction with the robot's segment length.
     parent_of = {joint: _mapped_ancestor(human, joint, set(joints)) for joint in joints}
-    leg_human = sum(_median_length(human_pos, index, a, b) for a, b in (("LeftUpLeg", "LeftLeg"), ("LeftLeg", "LeftFoot")))
+    leg_human = sum(
+        _median_length(human_pos, index, a, b) for a, b in (("LeftUpLeg", "LeftLeg"), ("LeftLeg", "LeftFoot"))
+    )
     leg_robot = sum(np.linalg.norm(rest[a] - rest[b]) for a, b in (("LeftUpLeg", "LeftLeg"), ("LeftLeg", "LeftFoot")))
     root_scale = float(leg_robot / leg_human)
     orientations = _orientations(human_pos, index, robot, body_for, rest)
@@ -157,9 +172,18 @@ def build_targets(
     for side, (foot, toe) in enumerate(zip(FEET, TOES)):
         forward = human_pos[:, index[toe]] - human_pos[:, index[foot]]
         position, rotation, foot_lift[:, side], contact[:, side] = plant_foot(
-            targets[foot], forward, human_rot[:, index[foot]], contact[:, side], foot_vertices[side], fps,
-            shape.swing_clearance_m, shape.swing_lift_time_s, pelvis_yaw, leg_yaw_range(robot, body_for[foot]),
-            shape.planted_tilt_rad, shape.plant_drift,
+            targets[foot],
+            forward,
+            human_rot[:, index[foot]],
+            contact[:, side],
+            foot_vertices[side],
+            fps,
+            shape.swing_clearance_m,
+            shape.swing_lift_time_s,
+            pelvis_yaw,
+            leg_yaw_range(robot, body_for[foot]),
+            shape.planted_tilt_rad,
+            shape.plant_drift,
             0.5 * (human_pos[:, index[foot]] + human_pos[:, index[toe]]) * root_scale,
         )
         targets[foot] = position
@@ -172,9 +196,16 @@ def build_targets(
         if resting[:, k].any():
             targets[joint] = hold_in_contact(targets[joint], resting[:, k], fps, body_contact.release_s)
     return RetargetTargets(
-        fps=fps, bodies=tuple(bodies), human_joints=tuple(joints),
-        positions=np.stack([targets[j] for j in joints], axis=1), orientations=orientations,
-        foot_contact=contact, foot_lift=foot_lift, body_contact=resting, human_scale=root_scale, human_pelvis=human_pos[:, index[PELVIS]] * root_scale,
+        fps=fps,
+        bodies=tuple(bodies),
+        human_joints=tuple(joints),
+        positions=np.stack([targets[j] for j in joints], axis=1),
+        orientations=orientations,
+        foot_contact=contact,
+        foot_lift=foot_lift,
+        body_contact=resting,
+        human_scale=root_scale,
+        human_pelvis=human_pos[:, index[PELVIS]] * root_scale,
     )
 
 
@@ -215,10 +246,14 @@ def _human_contacts(pos: np.ndarray, index: dict[str, int], fps: float, threshol
 
 
 def _orientations(
-    pos: np.ndarray, index: dict[str, int], robot: Robot,
-    body_for: dict[str, str], rest: dict[str, np.ndarray],
+    pos: np.ndarray,
+    index: dict[str, int],
+    robot: Robot,
+    body_for: dict[str, str],
+    rest: dict[str, np.ndarray],
 ) -> dict[str, np.ndarray]:
     """Pelvis and torso frames from keypoints, times the robot's rest offset for the same construction."""
+
     def pelvis_frame(p):  # up along the spine, left across the hips
         return frame_from_axes(p[TORSO] - p[PELVIS], p[HIPS_LR[0]] - p[HIPS_LR[1]])
 

@@ -20,7 +20,13 @@ import torch
 from rd_pipeline.robots.config import RobotConfig
 
 ResidualPreset = Literal[
-    "absolute", "selective", "hip_knee_ankle", "all_legs", "legs_torso", "all", "reference_locked",
+    "absolute",
+    "selective",
+    "hip_knee_ankle",
+    "all_legs",
+    "legs_torso",
+    "all",
+    "reference_locked",
 ]
 RESIDUAL_PRESETS: tuple[str, ...] = get_args(ResidualPreset)
 
@@ -74,8 +80,14 @@ def joint_semantics(config: RobotConfig, preset: str) -> tuple[str, ...]:
 class ResidualActions:
     """Turns policy outputs (N, A) into joint position targets for the P policy joints."""
 
-    def __init__(self, config: ActionConfig, semantics: tuple[str, ...], default_pos: torch.Tensor,
-                 lower: torch.Tensor, upper: torch.Tensor) -> None:
+    def __init__(
+        self,
+        config: ActionConfig,
+        semantics: tuple[str, ...],
+        default_pos: torch.Tensor,
+        lower: torch.Tensor,
+        upper: torch.Tensor,
+    ) -> None:
         self.config = config
         self.semantics = semantics
         self.outputs = torch.tensor([i for i, s in enumerate(semantics) if s != "reference"], dtype=torch.long)

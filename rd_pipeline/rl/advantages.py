@@ -10,8 +10,12 @@ import torch
 
 
 def multi_head_gae(
-    rewards: torch.Tensor, values: torch.Tensor, dones: torch.Tensor, last_values: torch.Tensor,
-    gamma: float, lam: float,
+    rewards: torch.Tensor,
+    values: torch.Tensor,
+    dones: torch.Tensor,
+    last_values: torch.Tensor,
+    gamma: float,
+    lam: float,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """(advantages, returns), each (T, N, G), from rewards and values (T, N, G), dones (T, N), last_values (N, G)."""
     steps = rewards.shape[0]

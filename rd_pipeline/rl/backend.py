@@ -66,9 +66,12 @@ def state_buffers(num_envs: int, model: mujoco.MjModel) -> tuple[dict[str, np.nd
     of them (CPU backends fill the buffers; the environment reads the views)."""
     n = num_envs
     buffers = {
-        "qpos": np.zeros((n, model.nq)), "qvel": np.zeros((n, model.nv)),
-        "body_pos": np.zeros((n, model.nbody, 3)), "body_quat": np.zeros((n, model.nbody, 4)),
-        "body_vel": np.zeros((n, model.nbody, 6)), "actuator_force": np.zeros((n, model.nu)),
+        "qpos": np.zeros((n, model.nq)),
+        "qvel": np.zeros((n, model.nv)),
+        "body_pos": np.zeros((n, model.nbody, 3)),
+        "body_quat": np.zeros((n, model.nbody, 4)),
+        "body_vel": np.zeros((n, model.nbody, 6)),
+        "actuator_force": np.zeros((n, model.nu)),
         "contact_force": np.zeros((n, model.nbody, 3)),
     }
     return buffers, PhysicsState(**{name: torch.from_numpy(array) for name, array in buffers.items()})
@@ -115,8 +118,13 @@ class MujocoCpuBackend:
             mujoco.mj_forward(self.models[i], data)
             self._read(i)
 
-    def step(self, ctrl: torch.Tensor, substeps: int, joint_force: torch.Tensor | None = None,
-             active: torch.Tensor | None = None) -> PhysicsState:
+    def step(
+        self,
+        ctrl: torch.Tensor,
+        substeps: int,
+        joint_force: torch.Tensor | None = None,
+        active: torch.Tensor | None = None,
+    ) -> PhysicsState:
         """Hold `ctrl` (N, nu) PD targets for `substeps` physics steps, with extra generalized forces
         `joint_force` (N, nv) (random force injection) held over the same steps; environments where
         `active` (N,) is False are left as they are (finished rollouts)."""

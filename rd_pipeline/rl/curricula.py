@@ -36,8 +36,9 @@ def initial_state(cfg: CurriculaCfg, terminations: TerminationsCfg) -> Curriculu
     return CurriculumState(motion_far_m=terminations.motion_far_init_m, penalty_scale=cfg.penalty_scale[0])
 
 
-def update(state: CurriculumState, mean_length: float, count: int, cfg: CurriculaCfg,
-           terminations: TerminationsCfg) -> None:
+def update(
+    state: CurriculumState, mean_length: float, count: int, cfg: CurriculaCfg, terminations: TerminationsCfg
+) -> None:
     """Ease both curricula when `count` episodes just ended shorter than `down_up[0]` on average,
     tighten them when longer than `down_up[1]`."""
     if count == 0:

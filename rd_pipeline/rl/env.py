@@ -33,8 +33,16 @@ DTYPE = torch.float32
 class TrackingEnv:
     """rsl-rl style vectorized env: `get_observations()`, `step(actions)`."""
 
-    def __init__(self, robot: Robot, reference: ReferenceMotion, sampler: SegmentSampler,
-                 segment_starts: np.ndarray, segment_lengths: np.ndarray, config: EnvConfig, seed: int) -> None:
+    def __init__(
+        self,
+        robot: Robot,
+        reference: ReferenceMotion,
+        sampler: SegmentSampler,
+        segment_starts: np.ndarray,
+        segment_lengths: np.ndarray,
+        config: EnvConfig,
+        seed: int,
+    ) -> None:
         self.robot = robot
         self.config = config
         self.sampler = sampler
@@ -49,7 +57,8 @@ class TrackingEnv:
         sensors = config.backend == "rollout"
         base = simulation_model(robot, config.physics_dt, config.collision, body_sensors=sensors)
         models, dr_params = events.randomized_models(
-            base, self.num_envs, config.randomization, base.body(rc.root_body).id, self.rng)
+            base, self.num_envs, config.randomization, base.body(rc.root_body).id, self.rng
+        )
         self.backend = make_backend(config.backend, models, config.threads, config.device)
         self.device = self.backend.device
         device = self.device
@@ -72,10 +81,12 @@ class TrackingEnv:
         ref_bodies = [reference.body_names.index(b) for b in tracked]
         root = reference.body_names.index(rc.root_body)
         self.ref = events.ReferenceFrames(
-            root_pos=tensor(reference.root_pos), root_quat=tensor(reference.root_quat),
+            root_pos=tensor(reference.root_pos),
+            root_quat=tensor(reference.root_quat),
             root_lin_vel=tensor(reference.body_lin_vel_w[:, root]),
             root_ang_vel=tensor(reference.body_ang_vel_w[:, root]),
-            joint_pos=tensor(reference.joint_pos), joint_vel=tensor(reference.joint_vel),
+            joint_pos=tensor(reference.joint_pos),
+            joint_vel=tensor(reference.joint_vel),
         )
         self.ref_body_pos = tensor(reference.body_pos_w[:, ref_bodies])
         self.ref_body_quat = tensor(reference.body_quat_w[:, ref_bodies])
@@ -95,8 +106,10 @@ class TrackingEnv:
             root=tracked.index(rc.root_body),
             feet=(tracked.index(rc.foot_bodies[0]), tracked.index(rc.foot_bodies[1])),
             keypoints=tuple(i for i, b in enumerate(tracked) if b not in rc.foot_bodies)[-3:],
-            joint_lower=lower[p], joint_upper=upper[p],
-            velocity_limit=tensor(rc.velocity_limit)[p], effort_limit=tensor(rc.effort_limit),
+            joint_lower=lower[p],
+            joint_upper=upper[p],
+            velocity_limit=tensor(rc.velocity_limit)[p],
+            effort_limit=tensor(rc.effort_limit),
         )
         self.rewards = RewardManager(config.rewards, self.term_context)
         self.sigma = AdaptiveSigma(config.curricula.adaptive_sigma_alpha, self.rewards.tracking_sigmas())
@@ -132,8 +145,9 @@ class TrackingEnv:
             segments = segments.clamp(min=0)
         frames = frames.to(self.device)
         model = self.backend.models[0]
-        qpos, qvel = events.rsi_state(self.config, self.ref, frames, model.nq, model.nv, self.qpos_idx,
-                                      self.dof_idx, self.joint_range, self.rng)
+        qpos, qvel = events.rsi_state(
+            self.config, self.ref, frames, model.nq, model.nv, self.qpos_idx, self.dof_idx, self.joint_range, self.rng
+        )
         self.backend.set_state(env_ids, qpos, qvel)
         self.frame[env_ids] = frames
         self.start_segment[env_ids] = segments.to(self.device)
@@ -161,8 +175,11 @@ class TrackingEnv:
         st = self._state() if st is None else st
         next_frame = (self.frame + 1).clamp(max=self.max_episode_length - 1)
         inputs = ActorInputs(
-            joint_pos=st["joint_pos"], joint_vel=st["joint_vel"], root_quat=st["root_quat"],
-            base_ang_vel=st["base_ang_vel"], last_action=self.action_history[:, 0],
+            joint_pos=st["joint_pos"],
+            joint_vel=st["joint_vel"],
+            root_quat=st["root_quat"],
+            base_ang_vel=st["base_ang_vel"],
+            last_action=self.action_history[:, 0],
             ref_joint_pos_next=self.ref.joint_pos[next_frame][:, self.policy_idx],
             default_pos=self.default_pos[self.policy_idx],
         )
@@ -242,8 +259,9 @@ class TrackingEnv:
         joint_force[:, self.dof_idx] = torch.as_tensor(forces, device=self.device)
         return joint_force
 
-    def _tracking_state(self, st: dict[str, torch.Tensor], actions: torch.Tensor,
-                        before_vel: torch.Tensor) -> TrackingState:
+    def _tracking_state(
+        self, st: dict[str, torch.Tensor], actions: torch.Tensor, before_vel: torch.Tensor
+    ) -> TrackingState:
         s = self.backend.state
         f = self.frame
         threshold = self.config.contact_threshold_n
@@ -255,25 +273,37 @@ class TrackingEnv:
         feet_vel = s.body_vel[:, self.feet_sim].to(DTYPE)
         touching = s.contact_force[:, self.undesired].to(DTYPE).norm(dim=-1) > threshold
         return TrackingState(
-            body_pos=s.body_pos[:, self.sim_bodies].to(DTYPE), body_quat=s.body_quat[:, self.sim_bodies].to(DTYPE),
-            body_lin_vel=body_vel[..., 3:], body_ang_vel=body_vel[..., :3],
-            joint_pos=st["joint_pos"], joint_vel=st["joint_vel"],
-            ref_body_pos=self.ref_body_pos[f], ref_body_quat=self.ref_body_quat[f],
-            ref_body_lin_vel=self.ref_body_lin_vel[f], ref_body_ang_vel=self.ref_body_ang_vel[f],
+            body_pos=s.body_pos[:, self.sim_bodies].to(DTYPE),
+            body_quat=s.body_quat[:, self.sim_bodies].to(DTYPE),
+            body_lin_vel=body_vel[..., 3:],
+            body_ang_vel=body_vel[..., :3],
+            joint_pos=st["joint_pos"],
+            joint_vel=st["joint_vel"],
+            ref_body_pos=self.ref_body_pos[f],
+            ref_body_quat=self.ref_body_quat[f],
+            ref_body_lin_vel=self.ref_body_lin_vel[f],
+            ref_body_ang_vel=self.ref_body_ang_vel[f],
             ref_joint_pos=self.ref.joint_pos[f][:, self.policy_idx],
             ref_joint_vel=self.ref.joint_vel[f][:, self.policy_idx],
-            feet_contact=contact, ref_feet_contact=self.ref_contact[f], feet_air_time=touchdown_air_time,
-            feet_force=force, feet_speed=feet_vel[..., 3:5].norm(dim=-1), torque=s.actuator_force.to(DTYPE),
-            joint_acc=(st["joint_vel"] - before_vel) / self.step_dt, action=actions,
-            last_action=self.action_history[:, 1], second_last_action=self.action_history[:, 2],
+            feet_contact=contact,
+            ref_feet_contact=self.ref_contact[f],
+            feet_air_time=touchdown_air_time,
+            feet_force=force,
+            feet_speed=feet_vel[..., 3:5].norm(dim=-1),
+            torque=s.actuator_force.to(DTYPE),
+            joint_acc=(st["joint_vel"] - before_vel) / self.step_dt,
+            action=actions,
+            last_action=self.action_history[:, 1],
+            second_last_action=self.action_history[:, 2],
             undesired_contacts=touching.sum(-1).to(DTYPE),
             terminated=torch.zeros(self.num_envs, dtype=torch.bool, device=self.device),
         )
 
     def _failed(self, state: TrackingState) -> torch.Tensor:
         """Motion far (a termination body too far from its reference) or root tilt error."""
-        far = motion_far(state.body_pos[:, self.term_idx], state.ref_body_pos[:, self.term_idx],
-                         self.curriculum.motion_far_m)
+        far = motion_far(
+            state.body_pos[:, self.term_idx], state.ref_body_pos[:, self.term_idx], self.curriculum.motion_far_m
+        )
         root = self.term_context.root
         limit = self.config.terminations.orientation_limit_rad
         return far | bad_orientation(state.body_quat[:, root], state.ref_body_quat[:, root], limit)
@@ -282,12 +312,18 @@ class TrackingEnv:
     def state_dict(self) -> dict:
         """Everything a resumed run needs to continue exactly: physics states, buffers, curricula, RNG."""
         return {
-            "physics": self.backend.get_states(), "frame": self.frame.clone(),
-            "start_segment": self.start_segment.clone(), "episode_length": self.episode_length_buf.clone(),
-            "action_history": self.action_history.clone(), "target_queue": self.target_queue.clone(),
-            "next_push": self.next_push.clone(), "obs_frames": self.obs_frames.clone(),
-            "motion_far": self.curriculum.motion_far_m, "penalty_scale": self.curriculum.penalty_scale,
-            "rng": self.rng.bit_generator.state, "feet_air_time": self.feet_air_time.clone(),
+            "physics": self.backend.get_states(),
+            "frame": self.frame.clone(),
+            "start_segment": self.start_segment.clone(),
+            "episode_length": self.episode_length_buf.clone(),
+            "action_history": self.action_history.clone(),
+            "target_queue": self.target_queue.clone(),
+            "next_push": self.next_push.clone(),
+            "obs_frames": self.obs_frames.clone(),
+            "motion_far": self.curriculum.motion_far_m,
+            "penalty_scale": self.curriculum.penalty_scale,
+            "rng": self.rng.bit_generator.state,
+            "feet_air_time": self.feet_air_time.clone(),
             "sigma_variance": dict(self.sigma.variance),
         }
 

@@ -15,12 +15,20 @@ from rd_pipeline.rl.env_config import EnvConfig, Randomization
 def nominal(config: EnvConfig, num_envs: int) -> EnvConfig:
     """The same environment without randomization or reset noise."""
     return dataclasses.replace(
-        config, num_envs=num_envs, randomization=Randomization(enabled=False), rsi_joint_pos=0.0, rsi_joint_vel=0.0,
-        rsi_root_pos_m=0.0, rsi_root_rot_deg=0.0, rsi_root_vel=0.0,
+        config,
+        num_envs=num_envs,
+        randomization=Randomization(enabled=False),
+        rsi_joint_pos=0.0,
+        rsi_joint_vel=0.0,
+        rsi_root_pos_m=0.0,
+        rsi_root_rot_deg=0.0,
+        rsi_root_vel=0.0,
     )
 
 
-def survival(env: TrackingEnv, policy: Callable[[TensorDict], torch.Tensor], start_frames: torch.Tensor) -> torch.Tensor:
+def survival(
+    env: TrackingEnv, policy: Callable[[TensorDict], torch.Tensor], start_frames: torch.Tensor
+) -> torch.Tensor:
     """(E,) seconds survived from each start frame (one environment per start), until failure or the motion end."""
     env.reset(torch.arange(env.num_envs), frames=start_frames)
     obs = env.get_observations()

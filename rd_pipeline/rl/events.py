@@ -23,8 +23,9 @@ DR_PARAMS = ("mass", "friction", "kp", "kd", "com_x", "com_y", "com_z", "delay",
 """Per-environment randomization draws, in the order the critic observes them."""
 
 
-def randomized_models(base: mujoco.MjModel, count: int, r: Randomization, root_body: int,
-                      rng: np.random.Generator) -> tuple[list[mujoco.MjModel], np.ndarray]:
+def randomized_models(
+    base: mujoco.MjModel, count: int, r: Randomization, root_body: int, rng: np.random.Generator
+) -> tuple[list[mujoco.MjModel], np.ndarray]:
     """`count` models with link mass, friction, PD gains and pelvis COM drawn per environment, and
     the (count, len(DR_PARAMS)) draws."""
     params = np.zeros((count, len(DR_PARAMS)))
@@ -57,8 +58,9 @@ def push_velocities(r: Randomization, count: int, rng: np.random.Generator) -> n
     return rng.uniform(-r.push_max_speed, r.push_max_speed, (count, 2))
 
 
-def random_joint_forces(r: Randomization, rfi_factor: np.ndarray, effort_limit: np.ndarray,
-                        rng: np.random.Generator) -> np.ndarray:
+def random_joint_forces(
+    r: Randomization, rfi_factor: np.ndarray, effort_limit: np.ndarray, rng: np.random.Generator
+) -> np.ndarray:
     """(N, J) random force injection: `torque_rfi` x factor x effort limit, redrawn every control step."""
     scale = r.torque_rfi * rfi_factor[:, None] * effort_limit
     return scale * rng.uniform(-1.0, 1.0, scale.shape)
@@ -76,9 +78,17 @@ class ReferenceFrames:
     joint_vel: torch.Tensor
 
 
-def rsi_state(c: EnvConfig, ref: ReferenceFrames, frames: torch.Tensor, nq: int, nv: int, qpos_idx: torch.Tensor,
-              dof_idx: torch.Tensor, joint_range: torch.Tensor, rng: np.random.Generator
-              ) -> tuple[torch.Tensor, torch.Tensor]:
+def rsi_state(
+    c: EnvConfig,
+    ref: ReferenceFrames,
+    frames: torch.Tensor,
+    nq: int,
+    nv: int,
+    qpos_idx: torch.Tensor,
+    dof_idx: torch.Tensor,
+    joint_range: torch.Tensor,
+    rng: np.random.Generator,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """(k, nq), (k, nv) float64 states at reference `frames` with the appendix noise (reference
     state initialization), joint positions clipped to their range."""
     k = len(frames)

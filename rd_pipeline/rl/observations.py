@@ -90,8 +90,12 @@ def ref_joint_pos_next(x: ActorInputs) -> torch.Tensor:
 
 
 ACTOR_TERMS: dict[str, Callable[[ActorInputs], torch.Tensor]] = {
-    "joint_pos": joint_pos, "joint_vel": joint_vel, "projected_gravity": gravity,
-    "base_ang_vel": base_ang_vel, "last_action": last_action, "ref_joint_pos_next": ref_joint_pos_next,
+    "joint_pos": joint_pos,
+    "joint_vel": joint_vel,
+    "projected_gravity": gravity,
+    "base_ang_vel": base_ang_vel,
+    "last_action": last_action,
+    "ref_joint_pos_next": ref_joint_pos_next,
 }
 """Term name -> function, in the order of an actor frame."""
 
@@ -110,5 +114,10 @@ def actor_frame(terms: tuple[ObservationTerm, ...], inputs: ActorInputs) -> torc
 def layout_json(terms: tuple[ObservationTerm, ...], history: int) -> dict:
     """The `observation` block of `policy.json`."""
     frame = sum(t.size for t in terms)
-    return {"history": history, "frame_size": frame, "size": frame * history, "order": "oldest_first",
-            "terms": [asdict(t) for t in terms]}
+    return {
+        "history": history,
+        "frame_size": frame,
+        "size": frame * history,
+        "order": "oldest_first",
+        "terms": [asdict(t) for t in terms],
+    }

@@ -92,21 +92,42 @@ class MultiHeadPPO(PPO):
     def compute_returns(self, obs: TensorDict) -> None:
         st = self.storage
         last_values = self.critic(obs).detach()
-        advantages, returns = multi_head_gae(st.rewards, st.values, st.dones.squeeze(-1), last_values, self.gamma, self.lam)
+        advantages, returns = multi_head_gae(
+            st.rewards, st.values, st.dones.squeeze(-1), last_values, self.gamma, self.lam
+        )
         st.returns = returns
         st.advantages = combined_advantage(advantages).unsqueeze(-1)
 
 
-def build_ppo(obs: TensorDict, num_envs: int, num_actions: int, heads: int, config: PpoConfig,
-              device: str = "cpu") -> MultiHeadPPO:
+def build_ppo(
+    obs: TensorDict, num_envs: int, num_actions: int, heads: int, config: PpoConfig, device: str = "cpu"
+) -> MultiHeadPPO:
     groups = {"actor": ["policy"], "critic": ["critic"]}
-    actor = MLPModel(obs, groups, "actor", num_actions, list(config.hidden_dims), "relu", obs_normalization=True,
-                     distribution_cfg={"class_name": "GaussianDistribution", "init_std": config.init_noise_std})
+    actor = MLPModel(
+        obs,
+        groups,
+        "actor",
+        num_actions,
+        list(config.hidden_dims),
+        "relu",
+        obs_normalization=True,
+        distribution_cfg={"class_name": "GaussianDistribution", "init_std": config.init_noise_std},
+    )
     critic = MLPModel(obs, groups, "critic", heads, list(config.hidden_dims), "relu", obs_normalization=True)
     storage = MultiHeadRolloutStorage(num_envs, config.steps_per_env, obs, num_actions, heads, device)
     return MultiHeadPPO(
-        actor, critic, storage, num_learning_epochs=config.learning_epochs, num_mini_batches=config.mini_batches,
-        clip_param=config.clip, gamma=config.gamma, lam=config.lam, value_loss_coef=config.value_loss_coef,
-        entropy_coef=config.entropy_coef, learning_rate=config.learning_rate, max_grad_norm=config.max_grad_norm,
-        desired_kl=config.desired_kl, device=device,
+        actor,
+        critic,
+        storage,
+        num_learning_epochs=config.learning_epochs,
+        num_mini_batches=config.mini_batches,
+        clip_param=config.clip,
+        gamma=config.gamma,
+        lam=config.lam,
+        value_loss_coef=config.value_loss_coef,
+        entropy_coef=config.entropy_coef,
+        learning_rate=config.learning_rate,
+        max_grad_norm=config.max_grad_norm,
+        desired_kl=config.desired_kl,
+        device=device,
     )

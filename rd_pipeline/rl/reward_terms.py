@@ -155,6 +155,7 @@ def _excess(value: torch.Tensor, limit: torch.Tensor) -> torch.Tensor:
 
 # Term functions: (state, context, term config) -> (N,) error (tracking) or penalty magnitude.
 
+
 def body_pos(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     return _sq(s.body_pos - s.ref_body_pos).mean(-1)
 

@@ -91,21 +91,34 @@ class RewardsCfg:
 
 
 REWARD_TERMS: dict[str, tuple[Callable[..., torch.Tensor], str]] = {
-    "body_pos": (terms.body_pos, "body"), "body_pos_rel": (terms.body_pos_rel, "body"),
-    "keypoint_pos": (terms.keypoint_pos, "body"), "keypoint_pos_rel": (terms.keypoint_pos_rel, "body"),
-    "feet_pos": (terms.feet_pos, "body"), "feet_pos_rel": (terms.feet_pos_rel, "body"),
-    "body_orientation": (terms.body_orientation, "body"), "body_lin_vel": (terms.body_lin_vel, "body"),
+    "body_pos": (terms.body_pos, "body"),
+    "body_pos_rel": (terms.body_pos_rel, "body"),
+    "keypoint_pos": (terms.keypoint_pos, "body"),
+    "keypoint_pos_rel": (terms.keypoint_pos_rel, "body"),
+    "feet_pos": (terms.feet_pos, "body"),
+    "feet_pos_rel": (terms.feet_pos_rel, "body"),
+    "body_orientation": (terms.body_orientation, "body"),
+    "body_lin_vel": (terms.body_lin_vel, "body"),
     "body_ang_vel": (terms.body_ang_vel, "body"),
-    "root_pos": (terms.root_pos, "root"), "root_orientation": (terms.root_orientation, "root"),
-    "joint_pos": (terms.joint_pos, "joint"), "joint_vel": (terms.joint_vel, "joint"),
-    "contact_mask": (terms.contact_mask, "contact"), "feet_air_time": (terms.feet_air_time, "contact"),
-    "torque": (terms.torque, "regularization"), "dof_vel": (terms.dof_vel, "regularization"),
-    "dof_acc": (terms.dof_acc, "regularization"), "action_rate": (terms.action_rate, "regularization"),
+    "root_pos": (terms.root_pos, "root"),
+    "root_orientation": (terms.root_orientation, "root"),
+    "joint_pos": (terms.joint_pos, "joint"),
+    "joint_vel": (terms.joint_vel, "joint"),
+    "contact_mask": (terms.contact_mask, "contact"),
+    "feet_air_time": (terms.feet_air_time, "contact"),
+    "torque": (terms.torque, "regularization"),
+    "dof_vel": (terms.dof_vel, "regularization"),
+    "dof_acc": (terms.dof_acc, "regularization"),
+    "action_rate": (terms.action_rate, "regularization"),
     "action_smoothness": (terms.action_smoothness, "regularization"),
-    "foot_contact_force": (terms.foot_contact_force, "regularization"), "stumble": (terms.stumble, "regularization"),
-    "slippage": (terms.slippage, "regularization"), "dof_pos_limits": (terms.dof_pos_limits, "regularization"),
-    "dof_vel_limits": (terms.dof_vel_limits, "regularization"), "torque_limits": (terms.torque_limits, "regularization"),
-    "termination": (terms.termination, "regularization"), "collision": (terms.collision, "regularization"),
+    "foot_contact_force": (terms.foot_contact_force, "regularization"),
+    "stumble": (terms.stumble, "regularization"),
+    "slippage": (terms.slippage, "regularization"),
+    "dof_pos_limits": (terms.dof_pos_limits, "regularization"),
+    "dof_vel_limits": (terms.dof_vel_limits, "regularization"),
+    "torque_limits": (terms.torque_limits, "regularization"),
+    "termination": (terms.termination, "regularization"),
+    "collision": (terms.collision, "regularization"),
 }
 """Term name -> (function, the critic value head it feeds)."""
 
@@ -124,7 +137,10 @@ class RewardManager:
         return {name: term.sigma for name, term in self.terms if isinstance(term, TrackingTerm)}
 
     def compute(
-        self, state: TrackingState, penalty_scale: float, sigma: dict[str, float] | None = None,
+        self,
+        state: TrackingState,
+        penalty_scale: float,
+        sigma: dict[str, float] | None = None,
     ) -> tuple[torch.Tensor, dict[str, torch.Tensor], dict[str, torch.Tensor]]:
         """(N, G) reward per group (in `GROUPS` order), (N,) value and (N,) error per term.
 

@@ -62,8 +62,13 @@ class MujocoRolloutBackend:
             self.sensors[i] = data.sensordata
         self._publish(env_ids.numpy())
 
-    def step(self, ctrl: torch.Tensor, substeps: int, joint_force: torch.Tensor | None = None,
-             active: torch.Tensor | None = None) -> PhysicsState:
+    def step(
+        self,
+        ctrl: torch.Tensor,
+        substeps: int,
+        joint_force: torch.Tensor | None = None,
+        active: torch.Tensor | None = None,
+    ) -> PhysicsState:
         """Hold `ctrl` (N, nu) and `joint_force` (N, nv) for `substeps` physics steps of every
         environment (or of those where `active` is True)."""
         ids = np.arange(self.num_envs) if active is None else np.flatnonzero(active.numpy())
@@ -77,8 +82,17 @@ class MujocoRolloutBackend:
             self._trajectory = np.zeros((len(ids), substeps, self.nstate))
             self._sensor_trajectory = np.zeros((len(ids), substeps, model.nsensordata))
         models = self.models if len(ids) == self.num_envs else [self.models[i] for i in ids]
-        self.pool.rollout(models, self.datas, self.full[ids], controls, control_spec=CONTROL, nstep=substeps,
-                          state=self._trajectory, sensordata=self._sensor_trajectory, skip_checks=True)
+        self.pool.rollout(
+            models,
+            self.datas,
+            self.full[ids],
+            controls,
+            control_spec=CONTROL,
+            nstep=substeps,
+            state=self._trajectory,
+            sensordata=self._sensor_trajectory,
+            skip_checks=True,
+        )
         self.full[ids] = self._trajectory[:, -1]
         self.sensors[ids] = self._sensor_trajectory[:, -1]
         self._publish(ids)

@@ -23,14 +23,16 @@ from rd_pipeline.robots.primitives import fit_collision_meshes
 CollisionModel = Literal["primitive", "mesh"]
 
 
-def pd_simulation_model(mjcf: Path, joint_names: Sequence[str], kp: np.ndarray, kd: np.ndarray,
-                        effort_limit: np.ndarray, timestep: float) -> mujoco.MjModel:
+def pd_simulation_model(
+    mjcf: Path, joint_names: Sequence[str], kp: np.ndarray, kd: np.ndarray, effort_limit: np.ndarray, timestep: float
+) -> mujoco.MjModel:
     """A compiled model whose actuator driving `joint_names[i]` is a PD with `kp[i]`, `kd[i]`, `effort_limit[i]`."""
     return _pd_spec(mjcf, joint_names, kp, kd, effort_limit, timestep).compile()
 
 
-def simulation_model(robot: Robot, timestep: float = 0.002, collision: CollisionModel = "mesh",
-                     body_sensors: bool = False) -> mujoco.MjModel:
+def simulation_model(
+    robot: Robot, timestep: float = 0.002, collision: CollisionModel = "mesh", body_sensors: bool = False
+) -> mujoco.MjModel:
     """The robot with the config's gains and effort limits: `mesh` collides the MJCF's geometry
     (every pair of geoms), `primitive` the fitted training shapes (see `primitive_collision`).
     `body_sensors` adds the sensors a batched rollout reads its results from (`add_body_sensors`)."""
@@ -51,21 +53,33 @@ angular velocity of the body origin (3 + 3), net contact force on the body, worl
 def add_body_sensors(spec: mujoco.MjSpec) -> None:
     """Sensors for every body but the world (`BODY_SENSORS`), then each actuator's force."""
     frame = (
-        mujoco.mjtSensor.mjSENS_FRAMEPOS, mujoco.mjtSensor.mjSENS_FRAMEQUAT,
-        mujoco.mjtSensor.mjSENS_FRAMELINVEL, mujoco.mjtSensor.mjSENS_FRAMEANGVEL,
+        mujoco.mjtSensor.mjSENS_FRAMEPOS,
+        mujoco.mjtSensor.mjSENS_FRAMEQUAT,
+        mujoco.mjtSensor.mjSENS_FRAMELINVEL,
+        mujoco.mjtSensor.mjSENS_FRAMEANGVEL,
     )
     # Contact sensor: data = force (bit 1), reduce = net force (3), one result, in the world frame.
     net_force = [1 << int(mujoco.mjtConDataField.mjCONDATA_FORCE), 3, 1]
     for body in spec.bodies[1:]:
         for name, kind in zip(BODY_SENSORS, frame):
-            spec.add_sensor(name=f"rd_{name}_{body.name}", type=kind, objtype=mujoco.mjtObj.mjOBJ_XBODY,
-                            objname=body.name)
-        spec.add_sensor(name=f"rd_contact_force_{body.name}", type=mujoco.mjtSensor.mjSENS_CONTACT,
-                        objtype=mujoco.mjtObj.mjOBJ_BODY, objname=body.name, intprm=net_force)
+            spec.add_sensor(
+                name=f"rd_{name}_{body.name}", type=kind, objtype=mujoco.mjtObj.mjOBJ_XBODY, objname=body.name
+            )
+        spec.add_sensor(
+            name=f"rd_contact_force_{body.name}",
+            type=mujoco.mjtSensor.mjSENS_CONTACT,
+            objtype=mujoco.mjtObj.mjOBJ_BODY,
+            objname=body.name,
+            intprm=net_force,
+        )
     for actuator in spec.actuators:
         actuator.name = actuator.name or f"rd_{actuator.target}"
-        spec.add_sensor(name=f"rd_actuator_force_{actuator.name}", type=mujoco.mjtSensor.mjSENS_ACTUATORFRC,
-                        objtype=mujoco.mjtObj.mjOBJ_ACTUATOR, objname=actuator.name)
+        spec.add_sensor(
+            name=f"rd_actuator_force_{actuator.name}",
+            type=mujoco.mjtSensor.mjSENS_ACTUATORFRC,
+            objtype=mujoco.mjtObj.mjOBJ_ACTUATOR,
+            objname=actuator.name,
+        )
 
 
 def body_sensor_index(model: mujoco.MjModel, name: str) -> np.ndarray:
@@ -82,8 +96,9 @@ def actuator_force_index(model: mujoco.MjModel) -> np.ndarray:
     return np.array([model.sensor(f"rd_actuator_force_{model.actuator(i).name}").adr[0] for i in range(model.nu)])
 
 
-def primitive_collision(spec: mujoco.MjSpec, foot_bodies: Sequence[str],
-                        collision_pairs: Sequence[tuple[str, str]]) -> None:
+def primitive_collision(
+    spec: mujoco.MjSpec, foot_bodies: Sequence[str], collision_pairs: Sequence[tuple[str, str]]
+) -> None:
     """Turn `spec` into a training model: every collision mesh becomes its fitted primitives (see
     `rd_pipeline.robots.primitives`); robot geoms touch the floor, and each other only in the robot
     config's collision pairs (frictionless, condim 1), as mjlab trains its humanoids."""
@@ -101,9 +116,16 @@ def primitive_collision(spec: mujoco.MjSpec, foot_bodies: Sequence[str],
             geom = mesh_geom
         else:  # a further slab of the same mesh: a new geom with the mesh geom's contact settings
             body = spec.body(model.body(int(model.geom_bodyid[shape.geom])).name)
-            geom = body.add_geom(name=f"{mesh_geom.name}_{count}", friction=mesh_geom.friction,
-                                 condim=mesh_geom.condim, solref=mesh_geom.solref, solimp=mesh_geom.solimp,
-                                 margin=mesh_geom.margin, gap=mesh_geom.gap, priority=mesh_geom.priority)
+            geom = body.add_geom(
+                name=f"{mesh_geom.name}_{count}",
+                friction=mesh_geom.friction,
+                condim=mesh_geom.condim,
+                solref=mesh_geom.solref,
+                solimp=mesh_geom.solimp,
+                margin=mesh_geom.margin,
+                gap=mesh_geom.gap,
+                priority=mesh_geom.priority,
+            )
         geom.type = mujoco.mjtGeom.mjGEOM_CAPSULE if shape.kind == "capsule" else mujoco.mjtGeom.mjGEOM_BOX
         geom.meshname = ""
         geom.pos = shape.pos
@@ -128,8 +150,9 @@ def primitive_collision(spec: mujoco.MjSpec, foot_bodies: Sequence[str],
                 spec.add_exclude(bodyname1=first, bodyname2=second)
 
 
-def _pd_spec(mjcf: Path, joint_names: Sequence[str], kp: np.ndarray, kd: np.ndarray, effort_limit: np.ndarray,
-             timestep: float) -> mujoco.MjSpec:
+def _pd_spec(
+    mjcf: Path, joint_names: Sequence[str], kp: np.ndarray, kd: np.ndarray, effort_limit: np.ndarray, timestep: float
+) -> mujoco.MjSpec:
     spec = mujoco.MjSpec.from_file(str(mjcf))
     spec.discard_visual()
     spec.option.timestep = timestep
@@ -152,8 +175,15 @@ RANDOMIZED_FIELDS = ("body_mass", "geom_friction", "body_ipos", "actuator_gainpr
 """Model fields `randomized_copy` changes (per-world arrays in batched backends)."""
 
 
-def randomized_copy(model: mujoco.MjModel, mass: float, friction: float, kp: float, kd: float,
-                    com_body: int | None = None, com_offset: np.ndarray | None = None) -> mujoco.MjModel:
+def randomized_copy(
+    model: mujoco.MjModel,
+    mass: float,
+    friction: float,
+    kp: float,
+    kd: float,
+    com_body: int | None = None,
+    com_offset: np.ndarray | None = None,
+) -> mujoco.MjModel:
     """A copy of `model` with link masses, ground friction and PD gains scaled by the given factors
     and, optionally, body `com_body`'s centre of mass moved by `com_offset` (domain randomization)."""
     out = copy.copy(model)

@@ -23,10 +23,17 @@ def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, env: Tracking
     """Written beside its final name and renamed, so an interrupted save never leaves a torn checkpoint."""
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(".partial")
-    torch.save({
-        "iteration": iteration, "algorithm": ppo.save(), "learning_rate": ppo.learning_rate,
-        "sampler": env.sampler.state_dict(), "env": env.state_dict(), "torch_rng": torch.get_rng_state(),
-    }, partial)
+    torch.save(
+        {
+            "iteration": iteration,
+            "algorithm": ppo.save(),
+            "learning_rate": ppo.learning_rate,
+            "sampler": env.sampler.state_dict(),
+            "env": env.state_dict(),
+            "torch_rng": torch.get_rng_state(),
+        },
+        partial,
+    )
     os.replace(partial, path)
 
 
@@ -43,8 +50,13 @@ def load_checkpoint(path: Path, ppo: MultiHeadPPO, env: TrackingEnv) -> int:
 
 
 def train(
-    env: TrackingEnv, ppo: MultiHeadPPO, iterations: int, out_dir: Path, checkpoint_every: int,
-    start_iteration: int = 0, on_iteration: Callable[[dict], None] = lambda row: None,
+    env: TrackingEnv,
+    ppo: MultiHeadPPO,
+    iterations: int,
+    out_dir: Path,
+    checkpoint_every: int,
+    start_iteration: int = 0,
+    on_iteration: Callable[[dict], None] = lambda row: None,
 ) -> list[dict]:
     """Run PPO from `start_iteration` to `iterations`, checkpointing every `checkpoint_every` and at the end.
 
@@ -73,13 +85,15 @@ def train(
         seconds = time.perf_counter() - began
         per_group = torch.stack(rewards).mean(0)
         row = {
-            "iteration": iteration + 1, "seconds": round(seconds, 3),
+            "iteration": iteration + 1,
+            "seconds": round(seconds, 3),
             "samples_per_s": round(env.num_envs * ppo.storage.num_transitions_per_env / seconds, 1),
             "episode_length_s": round(float(np.mean(lengths)) / 50.0, 4) if lengths else None,
             "reward": round(float(per_group.sum()), 4),
             **{f"reward_{g}": round(float(v), 4) for g, v in zip(GROUPS, per_group)},
             **{f"loss_{k}": round(float(v), 4) for k, v in losses.items()},
-            "learning_rate": ppo.learning_rate, "motion_far_m": round(env.curriculum.motion_far_m, 4),
+            "learning_rate": ppo.learning_rate,
+            "motion_far_m": round(env.curriculum.motion_far_m, 4),
             "penalty_scale": round(env.curriculum.penalty_scale, 4),
         }
         history.append(row)

@@ -22,8 +22,13 @@ from rd_pipeline.rl.sim_model import RANDOMIZED_FIELDS
 class MujocoWarpBackend:
     """N worlds of one MuJoCo Warp model and data."""
 
-    def __init__(self, models: list[mujoco.MjModel], device: str = "cuda", contacts_per_world: int = 48,
-                 constraints_per_world: int = 256) -> None:
+    def __init__(
+        self,
+        models: list[mujoco.MjModel],
+        device: str = "cuda",
+        contacts_per_world: int = 48,
+        constraints_per_world: int = 256,
+    ) -> None:
         """`contacts_per_world`/`constraints_per_world` size Warp's fixed buffers: a fallen humanoid
         touches the floor at a few dozen points, each a 4-row pyramidal-cone constraint."""
         try:
@@ -48,21 +53,38 @@ class MujocoWarpBackend:
                 if not np.array_equal(values, np.broadcast_to(values[:1], values.shape)):
                     current = getattr(self.model, field)
                     setattr(self.model, field, wp.array(values.astype(np.float32), dtype=current.dtype))
-            self.data = mjw.make_data(base, nworld=self.num_envs, nconmax=contacts_per_world,
-                                      njmax=constraints_per_world)
+            self.data = mjw.make_data(
+                base, nworld=self.num_envs, nconmax=contacts_per_world, njmax=constraints_per_world
+            )
         self.graph = None
         self.graph_substeps = 0
         self.root_ids = torch.as_tensor(base.body_rootid, device=self.device)
-        self.view = {name: wp.to_torch(getattr(self.data, name)) for name in (
-            "qpos", "qvel", "ctrl", "qfrc_applied", "qacc_warmstart", "xpos", "xquat", "cvel", "subtree_com",
-            "actuator_force", "cfrc_ext",
-        )}
+        self.view = {
+            name: wp.to_torch(getattr(self.data, name))
+            for name in (
+                "qpos",
+                "qvel",
+                "ctrl",
+                "qfrc_applied",
+                "qacc_warmstart",
+                "xpos",
+                "xquat",
+                "cvel",
+                "subtree_com",
+                "actuator_force",
+                "cfrc_ext",
+            )
+        }
         """Torch tensors sharing memory with the Warp data (writes go straight to the simulation)."""
         v = self.view
         self.state = PhysicsState(
-            qpos=v["qpos"], qvel=v["qvel"], body_pos=v["xpos"], body_quat=v["xquat"],
+            qpos=v["qpos"],
+            qvel=v["qvel"],
+            body_pos=v["xpos"],
+            body_quat=v["xquat"],
             body_vel=torch.zeros(self.num_envs, base.nbody, 6, device=self.device),
-            actuator_force=v["actuator_force"], contact_force=v["cfrc_ext"][..., 3:],
+            actuator_force=v["actuator_force"],
+            contact_force=v["cfrc_ext"][..., 3:],
         )
 
     def _refresh(self) -> PhysicsState:

@@ -159,7 +159,7 @@ class _Fields:
                 raise PipelineError(f"{self.path}: {dotted} has no pattern matching joint '{joint}'")
             value = patterns[match]
             if not isinstance(value, (int, float)) or not np.isfinite(value):
-                raise PipelineError(f"{self.path}: {dotted}.\"{match}\" must be a finite number, got {value!r}")
+                raise PipelineError(f'{self.path}: {dotted}."{match}" must be a finite number, got {value!r}')
             values[i] = float(value)
         values.setflags(write=False)
         return values

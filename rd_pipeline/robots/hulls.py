@@ -67,7 +67,10 @@ class BodyHulls:
 
 
 def support_lowest_z(
-    pos_w: np.ndarray, quat_w: np.ndarray, points: np.ndarray, radii: np.ndarray | float,
+    pos_w: np.ndarray,
+    quat_w: np.ndarray,
+    points: np.ndarray,
+    radii: np.ndarray | float,
 ) -> np.ndarray:
     """(T,) lowest world z of one body's support points (V, 3), grown by `radii`, at poses (T, 3), (T, 4 wxyz).
 
@@ -91,7 +94,7 @@ def mesh_points_in_body(model: mujoco.MjModel, geom: int) -> np.ndarray:
     mesh = model.geom_dataid[geom]
     start = model.mesh_vertadr[mesh]
     count = model.mesh_vertnum[mesh]
-    vertices = model.mesh_vert[start:start + count].astype(float)
+    vertices = model.mesh_vert[start : start + count].astype(float)
     return _to_body(model, geom, vertices)
 
 

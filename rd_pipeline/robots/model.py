@@ -90,7 +90,9 @@ def check_against_model(config: RobotConfig, model: mujoco.MjModel) -> None:
     for field, names in named_bodies.items():
         for body in names:
             if body not in bodies:
-                raise PipelineError(f"{where}: {field} names body '{body}', which is not in the model{_did_you_mean(body, bodies)}")
+                raise PipelineError(
+                    f"{where}: {field} names body '{body}', which is not in the model{_did_you_mean(body, bodies)}"
+                )
 
 
 def _did_you_mean(name: str, options: list[str]) -> str:
@@ -140,4 +142,3 @@ def leg_joints(robot: Robot) -> list[str]:
                 on_chain.add(model.joint(joint).name)
             body = model.body_parentid[body]
     return [j for j in robot.config.joint_names if j in on_chain]
-

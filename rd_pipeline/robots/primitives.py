@@ -102,8 +102,9 @@ def principal_axes(points: np.ndarray) -> np.ndarray:
     return axes
 
 
-def fit_collision_meshes(model: mujoco.MjModel, foot_bodies: tuple[int, ...], max_pieces: int = 3,
-                         volume_ratio: float = 1.6) -> list[FittedShape]:
+def fit_collision_meshes(
+    model: mujoco.MjModel, foot_bodies: tuple[int, ...], max_pieces: int = 3, volume_ratio: float = 1.6
+) -> list[FittedShape]:
     """Primitives for every colliding mesh geom of `model`: one box on each of `foot_bodies`;
     elsewhere the mesh cut into 1..`max_pieces` slabs along its principal axis, each slab the
     smaller of its covering capsule and box, with the fewest slabs whose total volume is within

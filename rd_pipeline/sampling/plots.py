@@ -39,10 +39,24 @@ def plot_balancing(stats: SegmentStats, prior: BalancedPrior, path: Path) -> Non
     for k, (ax, joint) in enumerate(zip(axes[0], stats.selected)):
         edges = stats.bin_edges[k]
         width = np.diff(edges)
-        ax.bar(edges[:-1], prior.marginal_before[k], width=width, align="edge", color="tab:blue", alpha=0.5,
-               label="before balancing")
-        ax.bar(edges[:-1], prior.marginal_after[k], width=width, align="edge", color="tab:red", alpha=0.5,
-               label="after balancing")
+        ax.bar(
+            edges[:-1],
+            prior.marginal_before[k],
+            width=width,
+            align="edge",
+            color="tab:blue",
+            alpha=0.5,
+            label="before balancing",
+        )
+        ax.bar(
+            edges[:-1],
+            prior.marginal_after[k],
+            width=width,
+            align="edge",
+            color="tab:red",
+            alpha=0.5,
+            label="after balancing",
+        )
         ax.set_title(joint.replace("_joint", ""), fontsize=8)
         ax.set_xlabel("rad", fontsize=7)
         ax.tick_params(labelsize=7)

@@ -52,10 +52,12 @@ def solve_balanced_prior(histograms: np.ndarray, lengths: np.ndarray, solver: st
     weights /= weights.sum()
     time_weights = lengths / lengths.sum()
     return BalancedPrior(
-        weights=weights, time_weights=time_weights,
+        weights=weights,
+        time_weights=time_weights,
         marginal_before=np.einsum("s,skb->kb", time_weights, histograms),
         marginal_after=np.einsum("s,skb->kb", weights, histograms),
-        solve_s=solve_s, solver=solver,
+        solve_s=solve_s,
+        solver=solver,
     )
 
 

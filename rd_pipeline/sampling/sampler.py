@@ -129,14 +129,19 @@ class SegmentSampler:
                 seen = self.attempts > 0
                 fraction = torch.where(seen, self.failures / self.attempts.clamp(min=1.0), self.failure_rate)
                 alpha = self.config.ema_alpha
-                self.failure_rate = torch.where(seen, (1 - alpha) * self.failure_rate + alpha * fraction, self.failure_rate)
+                self.failure_rate = torch.where(
+                    seen, (1 - alpha) * self.failure_rate + alpha * fraction, self.failure_rate
+                )
                 self.failures.zero_()
                 self.attempts.zero_()
 
     def state_dict(self) -> dict:
         return {
-            "failure_rate": self.failure_rate.clone(), "failures": self.failures.clone(),
-            "attempts": self.attempts.clone(), "step": self.step, "generator": self.generator.get_state(),
+            "failure_rate": self.failure_rate.clone(),
+            "failures": self.failures.clone(),
+            "attempts": self.attempts.clone(),
+            "step": self.step,
+            "generator": self.generator.get_state(),
         }
 
     def load_state_dict(self, state: dict) -> None:

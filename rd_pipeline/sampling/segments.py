@@ -39,17 +39,29 @@ class SegmentStats:
         return len(self.starts)
 
     def save(self, path: Path) -> None:
-        np.savez(path, fps=self.fps, starts=self.starts, lengths=self.lengths, joint_names=np.array(self.joint_names),
-                 joint_std=self.joint_std, selected=np.array(self.selected), bin_edges=self.bin_edges,
-                 histograms=self.histograms)
+        np.savez(
+            path,
+            fps=self.fps,
+            starts=self.starts,
+            lengths=self.lengths,
+            joint_names=np.array(self.joint_names),
+            joint_std=self.joint_std,
+            selected=np.array(self.selected),
+            bin_edges=self.bin_edges,
+            histograms=self.histograms,
+        )
 
     @classmethod
     def load(cls, path: Path) -> SegmentStats:
         with open_npz(path) as data:
             return cls(
-                fps=float(data["fps"]), starts=data["starts"], lengths=data["lengths"],
-                joint_names=tuple(str(n) for n in data["joint_names"]), joint_std=data["joint_std"],
-                selected=tuple(str(n) for n in data["selected"]), bin_edges=data["bin_edges"],
+                fps=float(data["fps"]),
+                starts=data["starts"],
+                lengths=data["lengths"],
+                joint_names=tuple(str(n) for n in data["joint_names"]),
+                joint_std=data["joint_std"],
+                selected=tuple(str(n) for n in data["selected"]),
+                bin_edges=data["bin_edges"],
                 histograms=data["histograms"],
             )
 
@@ -66,8 +78,14 @@ def segment_bounds(n_frames: int, fps: float, segment_s: float, min_last_s: floa
 
 
 def segment_statistics(
-    joint_pos: np.ndarray, joint_names: tuple[str, ...], fps: float, selected: tuple[str, ...],
-    limits: np.ndarray, segment_s: float, min_last_s: float, bins: int,
+    joint_pos: np.ndarray,
+    joint_names: tuple[str, ...],
+    fps: float,
+    selected: tuple[str, ...],
+    limits: np.ndarray,
+    segment_s: float,
+    min_last_s: float,
+    bins: int,
 ) -> SegmentStats:
     """Histograms of `selected` joints per segment, with bins spanning each joint's limits (K, 2)."""
     starts, lengths = segment_bounds(joint_pos.shape[0], fps, segment_s, min_last_s)
@@ -80,8 +98,14 @@ def segment_statistics(
             counts, _ = np.histogram(np.clip(window[:, column], edges[k, 0], edges[k, -1]), bins=edges[k])
             histograms[s, k] = counts / counts.sum()
     return SegmentStats(
-        fps=fps, starts=starts, lengths=lengths, joint_names=joint_names, joint_std=joint_pos.std(axis=0),
-        selected=selected, bin_edges=edges, histograms=histograms,
+        fps=fps,
+        starts=starts,
+        lengths=lengths,
+        joint_names=joint_names,
+        joint_std=joint_pos.std(axis=0),
+        selected=selected,
+        bin_edges=edges,
+        histograms=histograms,
     )
 
 
@@ -90,7 +114,9 @@ def std_ranking(stats: SegmentStats, candidates: tuple[str, ...], mask: tuple[st
     order = sorted(candidates, key=lambda j: -stats.joint_std[stats.joint_names.index(j)])
     top = order[: len(mask)]
     return {
-        "ranked": [{"joint": j, "std_rad": round(float(stats.joint_std[stats.joint_names.index(j)]), 4)} for j in order],
+        "ranked": [
+            {"joint": j, "std_rad": round(float(stats.joint_std[stats.joint_names.index(j)]), 4)} for j in order
+        ],
         "mask": list(mask),
         "mask_ranks": {j: order.index(j) + 1 for j in mask},
         "top_k_by_std": top,

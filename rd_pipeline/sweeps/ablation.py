@@ -21,8 +21,14 @@ STUDIES: dict[str, dict[str, tuple[str, ...]]] = {
 
 METRICS: dict[str, tuple[str, ...]] = {
     "residual": ERROR_METRICS,
-    "sampler": ("completion_pct", "mean_survival_s", "success_10s_pct", "success_20s_pct", "success_30s_pct",
-                "start_zero_survival_s"),
+    "sampler": (
+        "completion_pct",
+        "mean_survival_s",
+        "success_10s_pct",
+        "success_20s_pct",
+        "success_30s_pct",
+        "start_zero_survival_s",
+    ),
 }
 """The columns of each study's table (the paper's table shapes), from the nominal policy report."""
 
@@ -57,18 +63,30 @@ def write_ablation(study: str, table: dict, results: list[TrialResult], out_dir:
     """`ablation.json` and `ablation.md` (arms x metrics, mean ± 95% CI over seeds)."""
     out_dir.mkdir(parents=True, exist_ok=True)
     failed = [r.trial.label for r in results if not r.ok]
-    (out_dir / "ablation.json").write_text(json.dumps({"study": study, "table": table, "failed_trials": failed},
-                                                      indent=2) + "\n")
+    (out_dir / "ablation.json").write_text(
+        json.dumps({"study": study, "table": table, "failed_trials": failed}, indent=2) + "\n"
+    )
     metrics = METRICS[study]
-    lines = [f"# Ablation: {study}", "", ("Mean ± 95% Student-t half-width over seeds (n = seeds with a report); "
-             "each seed is the mean over the sweep's robots and motions."), "",
-             "| arm | " + " | ".join(metrics) + " | n |", "|---|" + "---|" * (len(metrics) + 1)]
+    lines = [
+        f"# Ablation: {study}",
+        "",
+        (
+            "Mean ± 95% Student-t half-width over seeds (n = seeds with a report); "
+            "each seed is the mean over the sweep's robots and motions."
+        ),
+        "",
+        "| arm | " + " | ".join(metrics) + " | n |",
+        "|---|" + "---|" * (len(metrics) + 1),
+    ]
     for arm, row in table.items():
         cells = []
         for m in metrics:
             cell = row[m]
-            cells.append("–" if cell["mean"] is None else f"{cell['mean']:.2f}"
-                         + (f" ± {cell['ci95']:.2f}" if cell["ci95"] is not None else ""))
+            cells.append(
+                "–"
+                if cell["mean"] is None
+                else f"{cell['mean']:.2f}" + (f" ± {cell['ci95']:.2f}" if cell["ci95"] is not None else "")
+            )
         lines.append(f"| {arm} | " + " | ".join(cells) + f" | {max(row[m]['n'] for m in metrics)} |")
     if failed:
         lines += ["", "Failed trials: " + ", ".join(failed)]

@@ -57,15 +57,25 @@ class TrialResult:
     """Path of the trial's `report.json`."""
 
 
-def make_trials(robots: list[str], motions: list[str], seeds: list[int],
-                variants: dict[str, tuple[str, ...]] | None = None) -> list[Trial]:
+def make_trials(
+    robots: list[str], motions: list[str], seeds: list[int], variants: dict[str, tuple[str, ...]] | None = None
+) -> list[Trial]:
     variants = variants or {"default": ()}
-    return [Trial(r, m, s, name, sets) for (name, sets), r, m, s in itertools.product(variants.items(), robots, motions, seeds)]
+    return [
+        Trial(r, m, s, name, sets)
+        for (name, sets), r, m, s in itertools.product(variants.items(), robots, motions, seeds)
+    ]
 
 
 def _cli(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rd_pipeline", *args], capture_output=True, text=True, env=env,
-                          cwd=os.getcwd(), check=False)
+    return subprocess.run(
+        [sys.executable, "-m", "rd_pipeline", *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=os.getcwd(),
+        check=False,
+    )
 
 
 def run_trial(trial: Trial, profile: str | None, env: dict[str, str], resume: bool = False) -> tuple[bool, float, str]:
@@ -81,16 +91,26 @@ def run_trial(trial: Trial, profile: str | None, env: dict[str, str], resume: bo
     return done.returncode == 0, time.perf_counter() - began, (lines[-1] if lines and done.returncode else "")
 
 
-def run_sweep(trials: list[Trial], profile: str | None, executor: str, workers: int, ray_address: str | None,
-              find_report: Callable[[Trial], Path | None], on_result: Callable[[TrialResult], None],
-              resume: bool = False) -> list[TrialResult]:
+def run_sweep(
+    trials: list[Trial],
+    profile: str | None,
+    executor: str,
+    workers: int,
+    ray_address: str | None,
+    find_report: Callable[[Trial], Path | None],
+    on_result: Callable[[TrialResult], None],
+    resume: bool = False,
+) -> list[TrialResult]:
     """Shared upstream first (once per robot and motion), then every trial; results in trial order."""
     env = {**os.environ, "RD_ARTIFACTS": str(paths.artifacts_dir())}
     shared = sorted({(t.robot, t.motion) for t in trials})
     upstream_failed: dict[tuple[str, str], str] = {}
     for robot, motion in shared:
-        done = _cli(["run", "--robot", robot, "--motion", motion, "--until", SHARED_UNTIL]
-                    + (["--profile", profile] if profile else []), env)
+        done = _cli(
+            ["run", "--robot", robot, "--motion", motion, "--until", SHARED_UNTIL]
+            + (["--profile", profile] if profile else []),
+            env,
+        )
         if done.returncode:
             upstream_failed[(robot, motion)] = (done.stderr.strip().splitlines() or ["failed"])[-1]
     runnable = [t for t in trials if (t.robot, t.motion) not in upstream_failed]
@@ -116,12 +136,18 @@ def run_sweep(trials: list[Trial], profile: str | None, executor: str, workers: 
     return results
 
 
-def _run_on_ray(trials: list[Trial], profile: str | None, env: dict[str, str], address: str | None,
-                resume: bool) -> list:
+def _run_on_ray(
+    trials: list[Trial], profile: str | None, env: dict[str, str], address: str | None, resume: bool
+) -> list:
     import ray
 
-    ray.init(address=address, ignore_reinit_error=True, include_dashboard=False, log_to_driver=False,
-             **({} if address else {"num_cpus": os.cpu_count()}))
+    ray.init(
+        address=address,
+        ignore_reinit_error=True,
+        include_dashboard=False,
+        log_to_driver=False,
+        **({} if address else {"num_cpus": os.cpu_count()}),
+    )
     remote = ray.remote(num_cpus=1)(run_trial)
     try:
         return ray.get([remote.remote(t, profile, env, resume) for t in trials])
@@ -132,15 +158,30 @@ def _run_on_ray(trials: list[Trial], profile: str | None, env: dict[str, str], a
 def write_summary(results: list[TrialResult], out_dir: Path, columns: tuple[str, ...]) -> Path:
     """`summary.json` and `summary.md` (one row per trial) under `out_dir`."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    rows = [{**asdict(r.trial), "ok": r.ok, "seconds": round(r.seconds, 1), "error": r.error, "report": r.report,
-             **{c: r.metrics.get(c) for c in columns}} for r in results]
+    rows = [
+        {
+            **asdict(r.trial),
+            "ok": r.ok,
+            "seconds": round(r.seconds, 1),
+            "error": r.error,
+            "report": r.report,
+            **{c: r.metrics.get(c) for c in columns},
+        }
+        for r in results
+    ]
     (out_dir / "summary.json").write_text(json.dumps(rows, indent=2) + "\n")
     header = ["robot", "motion", "seed", "variant", "status", "seconds", *columns]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     for r in results:
-        values = [r.trial.robot, r.trial.motion, str(r.trial.seed), r.trial.variant,
-                  "ok" if r.ok else f"failed: {r.error}", f"{r.seconds:.0f}",
-                  *(_fmt(r.metrics.get(c)) for c in columns)]
+        values = [
+            r.trial.robot,
+            r.trial.motion,
+            str(r.trial.seed),
+            r.trial.variant,
+            "ok" if r.ok else f"failed: {r.error}",
+            f"{r.seconds:.0f}",
+            *(_fmt(r.metrics.get(c)) for c in columns),
+        ]
         lines.append("| " + " | ".join(values) + " |")
     path = out_dir / "summary.md"
     path.write_text("\n".join(lines) + "\n")

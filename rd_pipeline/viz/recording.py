@@ -17,12 +17,15 @@ from rd_pipeline.viz.rerun_view import log_human, log_points, log_robot_meshes, 
 TARGET_COLOR = (220, 60, 60)
 
 
-def record_motion(robot: str, motion: str, artifact_dirs: dict[str, Path], out: Path | None,
-                  tracked: Path | None = None) -> Path | None:
+def record_motion(
+    robot: str, motion: str, artifact_dirs: dict[str, Path], out: Path | None, tracked: Path | None = None
+) -> Path | None:
     """Log the human skeleton (parse), the robot reference (retarget or import) found in
     `artifact_dirs` and, given a validation's `tracked.npz`, the simulated robot beside them."""
     human_files = [d / HUMAN_MOTION_FILE for d in artifact_dirs.values() if (d / HUMAN_MOTION_FILE).is_file()]
-    reference_files = [(name, d / REFERENCE_FILE) for name, d in artifact_dirs.items() if (d / REFERENCE_FILE).is_file()]
+    reference_files = [
+        (name, d / REFERENCE_FILE) for name, d in artifact_dirs.items() if (d / REFERENCE_FILE).is_file()
+    ]
     if not human_files and not reference_files:
         raise PipelineError(f"nothing to show for {robot}/{motion}: no motion artifacts")
     rec = open_recording(f"{robot}_{motion}", out)
@@ -34,8 +37,15 @@ def record_motion(robot: str, motion: str, artifact_dirs: dict[str, Path], out: 
         model = load_robot(robot).model
         for stage, path in reference_files:
             reference = ReferenceMotion.load(path)
-            log_robot_meshes(rec, model, reference.body_names, reference.body_pos_w, reference.body_quat_w, reference.fps,
-                             entity=f"robot/{stage}")
+            log_robot_meshes(
+                rec,
+                model,
+                reference.body_names,
+                reference.body_pos_w,
+                reference.body_quat_w,
+                reference.fps,
+                entity=f"robot/{stage}",
+            )
             targets = path.parent / TARGETS_FILE
             if targets.is_file():
                 with open_npz(targets) as data:
@@ -69,16 +79,35 @@ def log_tracked(rec, model, reference: ReferenceMotion, tracked: Path, offset_m:
         body_pos, body_quat, first = data["body_pos"], data["body_quat"], int(data["first_frame"])
     names = [n for n in reference.body_names if model.body(n).id > 0]
     ids = [model.body(n).id for n in names]
-    log_robot_meshes(rec, model, names, body_pos[:, ids] + np.array([0.0, offset_m, 0.0]), body_quat[:, ids],
-                     reference.fps, "robot/tracked", color=TRACKED_COLOR, first_frame=first)
+    log_robot_meshes(
+        rec,
+        model,
+        names,
+        body_pos[:, ids] + np.array([0.0, offset_m, 0.0]),
+        body_quat[:, ids],
+        reference.fps,
+        "robot/tracked",
+        color=TRACKED_COLOR,
+        first_frame=first,
+    )
 
 
-def record_tracking(model, reference: ReferenceMotion, tracked: Path, name: str, out: Path, first_frame: int = 0) -> Path:
+def record_tracking(
+    model, reference: ReferenceMotion, tracked: Path, name: str, out: Path, first_frame: int = 0
+) -> Path:
     """The reference robot and the tracked (simulated) robot side by side on one timeline (the
     tracked one shifted `SIDE_BY_SIDE_M` along +y); `reference` is a clip starting at `first_frame`."""
     rec = open_recording(name, out)
-    log_robot_meshes(rec, model, reference.body_names, reference.body_pos_w, reference.body_quat_w, reference.fps,
-                     "robot/reference", first_frame=first_frame)
+    log_robot_meshes(
+        rec,
+        model,
+        reference.body_names,
+        reference.body_pos_w,
+        reference.body_quat_w,
+        reference.fps,
+        "robot/reference",
+        first_frame=first_frame,
+    )
     log_tracked(rec, model, reference, tracked, SIDE_BY_SIDE_M)
     rec.flush()
     return out

@@ -28,20 +28,27 @@ def _times(n_frames: int, fps: float, first_frame: int = 0) -> list[rr.TimeColum
 
 
 def _log_skeleton(
-    rec: rr.RecordingStream, entity: str, positions: np.ndarray, parents: np.ndarray, fps: float,
-    color: tuple[int, int, int], radius: float,
+    rec: rr.RecordingStream,
+    entity: str,
+    positions: np.ndarray,
+    parents: np.ndarray,
+    fps: float,
+    color: tuple[int, int, int],
+    radius: float,
 ) -> None:
     """Joints as points and bones as line segments, one row per frame."""
     n_frames, n_joints = positions.shape[:2]
     times = _times(n_frames, fps)
     rec.send_columns(
-        f"{entity}/joints", indexes=times,
+        f"{entity}/joints",
+        indexes=times,
         columns=rr.Points3D.columns(positions=positions.reshape(-1, 3)).partition([n_joints] * n_frames),
     )
     children = np.flatnonzero(parents >= 0)
     bones = np.stack([positions[:, parents[children]], positions[:, children]], axis=2)  # (T, K, 2, 3)
     rec.send_columns(
-        f"{entity}/bones", indexes=times,
+        f"{entity}/bones",
+        indexes=times,
         columns=rr.LineStrips3D.columns(strips=list(bones.reshape(-1, 2, 3))).partition([len(children)] * n_frames),
     )
     rec.log(f"{entity}/joints", rr.Points3D.from_fields(colors=[color], radii=[radius]), static=True)
@@ -53,8 +60,15 @@ def log_human(rec: rr.RecordingStream, human: HumanMotion, entity: str = "human"
 
 
 def log_robot_meshes(
-    rec: rr.RecordingStream, model: mujoco.MjModel, body_names: list[str], body_pos_w: np.ndarray,
-    body_quat_w: np.ndarray, fps: float, entity: str, color: tuple[int, int, int] = ROBOT_COLOR, first_frame: int = 0,
+    rec: rr.RecordingStream,
+    model: mujoco.MjModel,
+    body_names: list[str],
+    body_pos_w: np.ndarray,
+    body_quat_w: np.ndarray,
+    fps: float,
+    entity: str,
+    color: tuple[int, int, int] = ROBOT_COLOR,
+    first_frame: int = 0,
 ) -> None:
     """The robot's visual meshes, one static mesh per body, moved by per-frame body transforms
     (`body_pos_w` (T, B, 3), `body_quat_w` (T, B, 4) wxyz, bodies named by `body_names`).
@@ -69,10 +83,13 @@ def log_robot_meshes(
         if not len(vertices):
             continue
         path = f"{entity}/{name}"
-        rec.log(path, rr.Mesh3D(vertex_positions=vertices, triangle_indices=faces, albedo_factor=[*color, 255]), static=True)
+        rec.log(
+            path, rr.Mesh3D(vertex_positions=vertices, triangle_indices=faces, albedo_factor=[*color, 255]), static=True
+        )
         quat_xyzw = body_quat_w[:, b][:, [1, 2, 3, 0]]
-        rec.send_columns(path, indexes=times,
-                         columns=rr.Transform3D.columns(translation=body_pos_w[:, b], quaternion=quat_xyzw))
+        rec.send_columns(
+            path, indexes=times, columns=rr.Transform3D.columns(translation=body_pos_w[:, b], quaternion=quat_xyzw)
+        )
 
 
 def _body_mesh(model: mujoco.MjModel, body_id: int) -> tuple[np.ndarray, np.ndarray]:
@@ -81,8 +98,8 @@ def _body_mesh(model: mujoco.MjModel, body_id: int) -> tuple[np.ndarray, np.ndar
         if model.geom_bodyid[geom] != body_id or model.geom_type[geom] != mujoco.mjtGeom.mjGEOM_MESH:
             continue
         mesh = model.geom_dataid[geom]
-        v = model.mesh_vert[model.mesh_vertadr[mesh]: model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]]
-        f = model.mesh_face[model.mesh_faceadr[mesh]: model.mesh_faceadr[mesh] + model.mesh_facenum[mesh]]
+        v = model.mesh_vert[model.mesh_vertadr[mesh] : model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]]
+        f = model.mesh_face[model.mesh_faceadr[mesh] : model.mesh_faceadr[mesh] + model.mesh_facenum[mesh]]
         rotation = np.empty(9)
         mujoco.mju_quat2Mat(rotation, model.geom_quat[geom])
         vertices.append(v @ rotation.reshape(3, 3).T + model.geom_pos[geom])
@@ -93,12 +110,16 @@ def _body_mesh(model: mujoco.MjModel, body_id: int) -> tuple[np.ndarray, np.ndar
     return np.concatenate(vertices), np.concatenate(faces)
 
 
-def log_points(rec: rr.RecordingStream, entity: str, positions: np.ndarray, fps: float,
-               color: tuple[int, int, int], radius: float) -> None:
+def log_points(
+    rec: rr.RecordingStream, entity: str, positions: np.ndarray, fps: float, color: tuple[int, int, int], radius: float
+) -> None:
     """Points over time, e.g. the retargeting's keypoint targets."""
     n_frames, n_points = positions.shape[:2]
-    rec.send_columns(entity, indexes=_times(n_frames, fps),
-                     columns=rr.Points3D.columns(positions=positions.reshape(-1, 3)).partition([n_points] * n_frames))
+    rec.send_columns(
+        entity,
+        indexes=_times(n_frames, fps),
+        columns=rr.Points3D.columns(positions=positions.reshape(-1, 3)).partition([n_points] * n_frames),
+    )
     rec.log(entity, rr.Points3D.from_fields(colors=[color], radii=[radius]), static=True)
 
 
