@@ -14,7 +14,7 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion import MIN_MOTION_S
 from rd_pipeline.params import require_positive
 from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.ppo import PpoConfig
+from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.robots.assets import model_files
 from rd_pipeline.sampling.sampler import SamplerConfig
 

@@ -7,7 +7,7 @@ from typing import Any
 
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.evaluation.sim2sim import Protocol
+from rd_pipeline.evaluation.protocol import Protocol
 from rd_pipeline.robots.assets import model_files
 
 RECORDING_FILE = "sim2sim.rrd"

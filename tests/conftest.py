@@ -21,6 +21,21 @@ for variable, default in {
 
 LAFAN_DIR = Path(os.environ["RD_LAFAN_DIR"])
 RETARGETED_DIR = Path(os.environ["RD_RETARGETED_DIR"])
+ROBOT_ASSETS = Path(os.environ["RD_ROBOT_ASSETS"])
+MISSING_DATA = [str(p) for p in (LAFAN_DIR, RETARGETED_DIR, ROBOT_ASSETS) if not p.is_dir()]
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Without the real data every test that reads it is skipped, saying which folder is missing."""
+    if not MISSING_DATA:
+        return
+    reason = (
+        f"needs the shared data, missing: {', '.join(MISSING_DATA)} "
+        "(set RD_LAFAN_DIR, RD_RETARGETED_DIR and RD_ROBOT_ASSETS, or put the data in ../shared)"
+    )
+    for item in items:
+        if "offline" not in item.keywords:
+            item.add_marker(pytest.mark.skip(reason=reason))
 
 
 @pytest.fixture

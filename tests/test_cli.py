@@ -12,6 +12,7 @@ from rd_pipeline.stages import REGISTRY
 from rd_pipeline.profiles import PROFILES
 
 
+@pytest.mark.offline
 def test_robots_lists_the_three_configs() -> None:
     result = cli("robots")
     assert result.returncode == 0
@@ -31,6 +32,7 @@ def test_motions_lists_sources() -> None:
     assert len(table) == 14
 
 
+@pytest.mark.offline
 @pytest.mark.parametrize("command", ["run", "stage", "status", "view", "fetch-lafan", "robots", "motions"])
 def test_every_subcommand_has_help(command: str) -> None:
     result = cli(command, "--help")
@@ -72,6 +74,7 @@ def test_out_of_range_params_are_one_line_naming_the_parameter(assignment: str, 
     assert not (artifacts / "parse").exists()
 
 
+@pytest.mark.offline
 def test_fetch_lafan_rejects_a_wrong_archive(tmp_path: Path) -> None:
     archive = tmp_path / "lafan1.zip"
     with zipfile.ZipFile(archive, "w") as handle:
@@ -83,6 +86,7 @@ def test_fetch_lafan_rejects_a_wrong_archive(tmp_path: Path) -> None:
     assert not target.exists()
 
 
+@pytest.mark.offline
 def test_run_help_names_every_stage_and_profile() -> None:
     text = " ".join(cli("run", "--help").stdout.split())
     for name in [stage.name for stage in REGISTRY] + list(PROFILES):

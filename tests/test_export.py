@@ -23,7 +23,8 @@ from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.evaluate import nominal
-from rd_pipeline.rl.ppo import PpoConfig, build_ppo
+from rd_pipeline.rl.ppo import build_ppo
+from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
@@ -129,6 +130,7 @@ def test_policy_json_names_the_missing_field(tmp_path: Path) -> None:
         load_policy_spec(path)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("robot", "motion"), [("g1", "dance1_subject2"), ("h1_2", "dance2_subject4")])
 def test_smoke_profile_trains_exports_and_validates(robot: str, motion: str, artifacts: Path) -> None:
     result = cli("run", "--robot", robot, "--motion", motion, "--profile", "smoke")

@@ -8,9 +8,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from conftest import PROJECT
 
 
+@pytest.mark.slow
 def test_a_plain_install_runs_from_another_directory(tmp_path: Path) -> None:
     site = tmp_path / "site"
     install = subprocess.run(

@@ -66,6 +66,7 @@ def test_two_runs_of_one_key_started_together_both_succeed(artifacts: Path) -> N
     assert "iterations=4" in summary[-1]
 
 
+@pytest.mark.slow
 def test_a_truncated_artifact_is_reported_and_recomputed(artifacts: Path) -> None:
     assert cli(*CSV_RUN).returncode == 0
     (folder,) = list((artifacts / "import" / "h1_2" / "dance2_subject4").iterdir())
@@ -83,6 +84,7 @@ def test_a_truncated_artifact_is_reported_and_recomputed(artifacts: Path) -> Non
     assert _states("h1_2", "dance2_subject4")["import"]["state"] == "cached"
 
 
+@pytest.mark.slow
 def test_a_changed_byte_is_found_by_verify_and_when_a_stage_loads_the_artifact(artifacts: Path) -> None:
     assert cli(*CSV_RUN).returncode == 0
     (folder,) = list((artifacts / "import" / "h1_2" / "dance2_subject4").iterdir())
@@ -102,6 +104,7 @@ def test_a_changed_byte_is_found_by_verify_and_when_a_stage_loads_the_artifact(a
     assert _states("h1_2", "dance2_subject4", "--verify")["import"]["state"] == "cached"
 
 
+@pytest.mark.offline
 def test_reading_a_damaged_npz_names_the_file(tmp_path: Path) -> None:
     path = tmp_path / "reference.npz"
     path.write_bytes(b"PK\x03\x04 not really a zip")
@@ -150,9 +153,23 @@ def test_a_csv_of_a_few_rows_is_refused_with_the_minimum(rows: int, tmp_path: Pa
     assert f"error: {path}: {rows} frames at 30 fps is {seconds} s; a motion must last at least 1 s" in result.stderr
 
 
+@pytest.mark.offline
 def test_a_clip_past_the_end_is_clamped_and_said() -> None:
     said = []
     assert clip_frames("125:1000", 50.0, 6575, said.append) == (6250, 6575)
     assert said == ["train.clip '125:1000' ends after the 131.50 s motion: training on 125:131.50"]
     with pytest.raises(PipelineError, match=r"^train.clip '0:0.1' leaves less than 1 s of the 131.50 s motion$"):
         clip_frames("0:0.1", 50.0, 6575, said.append)
+
+
+def test_a_cached_parse_loads_neither_torch_nor_mujoco(artifacts: Path) -> None:
+    """What made a cached `run --until parse` take 3.2 s (`bench/cli_startup.py` times it)."""
+    script = (
+        "import sys; from rd_pipeline.cli import main; code = main(sys.argv[1:]); "
+        "print(code, 'torch._C' in sys.modules, 'mujoco' in sys.modules)"
+    )
+    args = [sys.executable, "-c", script, "run", "--until", "parse"]
+    first = subprocess.run(args, capture_output=True, text=True, cwd=PROJECT, env=os.environ.copy(), check=False)
+    assert first.stdout.split()[0] == "0", first.stderr  # computing may load them (scipy probes torch)
+    cached = subprocess.run(args, capture_output=True, text=True, cwd=PROJECT, env=os.environ.copy(), check=False)
+    assert cached.stdout.split() == ["0", "False", "False"] and "cached parse" in cached.stderr

@@ -137,6 +137,7 @@ def test_retarget_map_with_an_unknown_human_joint() -> None:
         )
 
 
+@pytest.mark.slow
 def test_stage_writes_reference_and_quality(artifacts: Path) -> None:
     result = cli("run", "--robot", "g1", "--motion", "dance1_subject3", "--until", "retarget")
     assert result.returncode == 0, result.stderr

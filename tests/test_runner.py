@@ -24,6 +24,7 @@ def _pipeline(robot: str, motion: str, values: dict | None = None, source: str |
     return Pipeline(REGISTRY, robot, motion, resolve_source(robot, motion, source), values or {})
 
 
+@pytest.mark.offline
 def test_key_is_canonical_and_sensitive() -> None:
     base = artifact_key("parse", 1, {"a": 1.0, "b": "x"}, {}, {"bvh": "00"})
     assert base == artifact_key("parse", 1, {"b": "x", "a": 1.0}, {}, {"bvh": "00"})
@@ -127,6 +128,7 @@ def test_unknown_robot_and_motion_are_one_line(artifacts: Path) -> None:
     assert line.endswith(hint)
 
 
+@pytest.mark.slow
 def test_cli_cache_hit_and_status_json(artifacts: Path) -> None:
     first = cli("run", "--robot", "g1", "--motion", "dance1_subject2", "--until", "parse")
     assert first.returncode == 0, first.stderr
@@ -148,6 +150,7 @@ def test_cli_cache_hit_and_status_json(artifacts: Path) -> None:
     assert any(path in line for line in table.splitlines())
 
 
+@pytest.mark.slow
 def test_killed_stage_leaves_no_artifact(artifacts: Path) -> None:
     folder = artifacts / "import" / "h1_2" / "dance2_subject4"
     process = subprocess.Popen(

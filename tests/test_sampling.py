@@ -125,6 +125,7 @@ def test_same_seed_same_samples_and_state_round_trip() -> None:
     assert not torch.equal(SegmentSampler(SamplerConfig(), balanced, seed=8).sample(4096), b.sample(4096))
 
 
+@pytest.mark.slow
 def test_stages_write_both_artifacts_with_plots(artifacts: Path) -> None:
     result = cli("run", "--robot", "h1_2", "--motion", "dance2_subject4", "--until", "prior")
     assert result.returncode == 0, result.stderr

@@ -15,6 +15,7 @@ FAST = ("train.iterations=1", "train.clip=0:4")
 """One PPO iteration on 4 s of motion: 4 validation starts per trial."""
 
 
+@pytest.mark.slow
 def test_ray_sweep_reports_a_failing_trial_and_finishes_the_others(artifacts: Path) -> None:
     pytest.importorskip("ray", reason="the ray extra is not installed (CI installs it)")
     trials = [
@@ -36,6 +37,7 @@ def test_ray_sweep_reports_a_failing_trial_and_finishes_the_others(artifacts: Pa
     assert len(seen) == 3
 
 
+@pytest.mark.slow
 def test_ablate_residual_writes_the_paper_table(artifacts: Path) -> None:
     result = cli(
         "ablate",

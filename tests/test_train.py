@@ -18,7 +18,8 @@ from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.params import parse_assignments
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.ppo import PpoConfig, build_ppo
+from rd_pipeline.rl.ppo import build_ppo
+from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
 from rd_pipeline.rl.trainer import load_checkpoint, train
 from rd_pipeline.robots import load_robot
@@ -39,6 +40,7 @@ def _setup(seed: int = 3, config: EnvConfig = EnvConfig(num_envs=4, threads=2)):
     return env, ppo
 
 
+@pytest.mark.slow
 def test_resume_continues_bit_for_bit(tmp_path: Path) -> None:
     env, ppo = _setup()
     (tmp_path / "a").mkdir()
@@ -114,6 +116,7 @@ def test_a_reward_weight_and_a_termination_threshold_set_on_the_command_line_cha
 @pytest.mark.parametrize(
     ("robot", "motion"), [("g1", "dance1_subject2"), ("h1", "dance1_subject1"), ("h1_2", "dance2_subject4")]
 )
+@pytest.mark.slow
 def test_smoke_profile_runs_the_dag_to_export(robot: str, motion: str, artifacts: Path) -> None:
     result = cli("run", "--robot", robot, "--motion", motion, "--until", "export", "--profile", "smoke")
     assert result.returncode == 0, result.stderr
@@ -134,6 +137,7 @@ def test_smoke_profile_runs_the_dag_to_export(robot: str, motion: str, artifacts
     assert action["semantics"].count("absolute") == len(action["outputs"]) - 4
 
 
+@pytest.mark.slow
 def test_cli_resume_continues_an_interrupted_training(artifacts: Path) -> None:
     import os
     import signal

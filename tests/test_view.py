@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from conftest import cli
 from rerun.chunk import RrdReader
 
@@ -18,6 +19,7 @@ def _rows_per_entity(path: Path) -> dict[str, int]:
     return rows
 
 
+@pytest.mark.slow
 def test_view_human_and_retargeted_robot(artifacts: Path, tmp_path: Path) -> None:
     out = tmp_path / "dance.rrd"
     result = cli("view", "--robot", "g1", "--motion", "dance1_subject1", "--out", str(out))
@@ -36,6 +38,7 @@ def test_view_human_and_retargeted_robot(artifacts: Path, tmp_path: Path) -> Non
     assert "/robot/retarget/left_ankle_roll_link" in static  # the mesh itself
 
 
+@pytest.mark.slow
 def test_view_imported_robot_reference(artifacts: Path, tmp_path: Path) -> None:
     out = tmp_path / "h1.rrd"
     result = cli("view", "--robot", "h1", "--motion", "dance2_subject3", "--out", str(out))
@@ -47,6 +50,7 @@ def test_view_imported_robot_reference(artifacts: Path, tmp_path: Path) -> None:
     assert set(rows.values()) == {11285}
 
 
+@pytest.mark.slow
 def test_view_without_a_display_writes_the_recording_and_says_how_to_open_it(artifacts: Path) -> None:
     result = cli("view", "--robot", "h1", "--motion", "dance2_subject3", env={"DISPLAY": "", "WAYLAND_DISPLAY": ""})
     assert result.returncode == 0, result.stderr

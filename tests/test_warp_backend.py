@@ -68,7 +68,8 @@ def test_ppo_trains_through_the_warp_backend(tmp_path) -> None:
 
     from rd_pipeline.rl.env import TrackingEnv
     from rd_pipeline.rl.env_config import EnvConfig
-    from rd_pipeline.rl.ppo import PpoConfig, build_ppo
+    from rd_pipeline.rl.ppo import build_ppo
+    from rd_pipeline.rl.ppo_config import PpoConfig
     from rd_pipeline.rl.rewards import GROUPS
     from rd_pipeline.rl.trainer import train
     from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler

@@ -15,26 +15,13 @@ import numpy as np
 import torch
 
 from rd_pipeline.evaluation.deploy import DeployController, Policy
+from rd_pipeline.evaluation.protocol import Protocol
 from rd_pipeline.export.policy_spec import PolicySpec
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.rl.backend import MujocoCpuBackend
 from rd_pipeline.rl.env_config import Randomization
 from rd_pipeline.rl.sim_model import randomized_copy
 from rd_pipeline.rl.terminations import bad_orientation, motion_far
-
-
-@dataclass(frozen=True)
-class Protocol:
-    """How rollouts start and when they fail."""
-
-    grid_s: float = 1.0
-    """Fixed-grid protocol: a rollout starts every `grid_s` seconds along the reference."""
-    motion_far_m: float = 0.5
-    """Failure: a termination body this far from its reference."""
-    orientation_limit_rad: float = 0.75
-    """Failure: pelvis gravity direction this far from the reference's."""
-    threads: int = 2
-    """Threads stepping the rollouts' physics."""
 
 
 @dataclass(frozen=True)

@@ -15,9 +15,11 @@ from fnmatch import fnmatch
 from typing import Literal, get_args
 
 import numpy as np
-import torch
 
+from rd_pipeline.lazy import lazy_import
 from rd_pipeline.robots.config import RobotConfig
+
+torch = lazy_import("torch")
 
 ResidualPreset = Literal[
     "absolute",

@@ -11,8 +11,10 @@ from rd_pipeline.rl.actions import ActionConfig
 from rd_pipeline.rl.curricula import CurriculaCfg
 from rd_pipeline.rl.observations import ObservationsCfg
 from rd_pipeline.rl.rewards import RewardsCfg
-from rd_pipeline.rl.sim_model import CollisionModel
 from rd_pipeline.rl.terminations import TerminationsCfg
+
+CollisionModel = Literal["primitive", "mesh"]
+"""`primitive`: boxes fitted to the collision meshes (training); `mesh`: the robot's own meshes (validation)."""
 
 
 @dataclass(frozen=True)

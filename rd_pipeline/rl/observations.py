@@ -10,9 +10,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
-import torch
-
+from rd_pipeline.lazy import lazy_import
 from rd_pipeline.rl.quat import projected_gravity
+
+torch = lazy_import("torch")
 
 
 @dataclass(frozen=True)

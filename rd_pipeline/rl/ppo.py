@@ -3,8 +3,6 @@ advantages summed then normalized (the algorithm's only departure from rsl-rl's 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import torch
 from rsl_rl.algorithms import PPO
 from rsl_rl.models import MLPModel
@@ -12,38 +10,7 @@ from rsl_rl.storage import RolloutStorage
 from tensordict import TensorDict
 
 from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
-
-
-@dataclass(frozen=True)
-class PpoConfig:
-    """Appendix "PPO, Network, and Training Parameters"."""
-
-    steps_per_env: int = 24
-    """Rollout length per environment."""
-    learning_epochs: int = 5
-    """Epochs per update."""
-    mini_batches: int = 4
-    """Mini-batches per epoch."""
-    clip: float = 0.2
-    """PPO clip."""
-    gamma: float = 0.99
-    """Discount."""
-    lam: float = 0.95
-    """GAE lambda."""
-    value_loss_coef: float = 1.0
-    """Value-loss coefficient."""
-    entropy_coef: float = 0.01
-    """Entropy coefficient."""
-    learning_rate: float = 1e-3
-    """Initial learning rate (adaptive schedule)."""
-    max_grad_norm: float = 1.0
-    """Gradient-norm limit."""
-    desired_kl: float = 0.01
-    """Target KL of the adaptive schedule."""
-    init_noise_std: float = 0.894
-    """Initial action-noise std (variance 0.8)."""
-    hidden_dims: tuple[int, ...] = (512, 256, 128)
-    """Actor and critic MLP widths (ReLU)."""
+from rd_pipeline.rl.ppo_config import PpoConfig
 
 
 class MultiHeadRolloutStorage(RolloutStorage):

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-import torch
+from rd_pipeline.lazy import lazy_import
+
+torch = lazy_import("torch")
 
 
 def rotate_inverse(quat: torch.Tensor, vec: torch.Tensor) -> torch.Tensor:

@@ -12,8 +12,7 @@ import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import torch
-
+from rd_pipeline.lazy import lazy_import
 from rd_pipeline.rl import reward_terms as terms
 from rd_pipeline.rl.reward_terms import (
     AirTimeTerm,
@@ -25,6 +24,8 @@ from rd_pipeline.rl.reward_terms import (
     TrackingState,
     TrackingTerm,
 )
+
+torch = lazy_import("torch")
 
 
 @dataclass(frozen=True)

@@ -11,16 +11,14 @@ from __future__ import annotations
 import copy
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Literal
 
 import mujoco
 import numpy as np
 
+from rd_pipeline.rl.env_config import CollisionModel
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.assets import asset_path
 from rd_pipeline.robots.primitives import fit_collision_meshes
-
-CollisionModel = Literal["primitive", "mesh"]
 
 
 def pd_simulation_model(

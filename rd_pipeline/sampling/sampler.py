@@ -12,7 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal, get_args
 
-import torch
+from rd_pipeline.lazy import lazy_import
+
+torch = lazy_import("torch")
+
 
 SamplerMode = Literal["uniform", "distribution", "failure", "combined"]
 MODES: tuple[str, ...] = get_args(SamplerMode)

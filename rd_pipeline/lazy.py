@@ -1,0 +1,28 @@
+"""Deferred imports for the modules that define stage parameters.
+
+Every command plans the whole DAG, so it imports every stage's params; those live beside torch code
+(reward terms, samplers). Importing torch there costs seconds that a cached `run --until parse`
+should not pay, so these modules take torch from `lazy_import`: the module object is created at
+once and loaded on its first attribute access (the standard library's `LazyLoader`).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from types import ModuleType
+
+
+def lazy_import(name: str) -> ModuleType:
+    """The module `name`, already imported or loaded on first use."""
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.find_spec(name)
+    if spec is None or spec.loader is None:
+        raise ModuleNotFoundError(f"No module named '{name}'", name=name)
+    loader = importlib.util.LazyLoader(spec.loader)
+    spec.loader = loader
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    loader.exec_module(module)
+    return module
