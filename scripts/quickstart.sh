@@ -3,16 +3,20 @@
 # (G1, dance1_subject2, smoke profile, artifacts in ./artifacts).
 #   EXTRAS=dev,dvc scripts/quickstart.sh     # extras to install (default: dev)
 #   SKIP_RUN=1 scripts/quickstart.sh         # set up only
+#   SKIP_INSTALL=1 scripts/quickstart.sh     # run only (the environment exists)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-if [ ! -x .venv/bin/python ]; then
-  python3 -m venv .venv
+if [ -z "${SKIP_INSTALL:-}" ]; then
+  if [ ! -x .venv/bin/python ]; then
+    python3 -m venv .venv
+  fi
+  .venv/bin/pip install --quiet --upgrade pip
+  # The CPU wheel first: otherwise a torch dependency pulls several GB of CUDA packages.
+  .venv/bin/pip install --quiet torch==2.13.0
+  # setuptools notes on every mapped editable install that its finder is in use; that is by design here.
+  PYTHONWARNINGS=ignore::UserWarning .venv/bin/pip install --quiet -e ".[${EXTRAS:-dev}]"
 fi
-.venv/bin/pip install --quiet --upgrade pip
-# The CPU wheel first: otherwise a torch dependency pulls several GB of CUDA packages.
-.venv/bin/pip install --quiet torch==2.13.0
-.venv/bin/pip install --quiet -e ".[${EXTRAS:-dev}]"
 
 # On the team's machines and in CI the data sits in ../shared; elsewhere set the variables yourself
 # (README: "Where data comes from").

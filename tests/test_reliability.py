@@ -173,3 +173,26 @@ def test_a_cached_parse_loads_neither_torch_nor_mujoco(artifacts: Path) -> None:
     assert first.stdout.split()[0] == "0", first.stderr  # computing may load them (scipy probes torch)
     cached = subprocess.run(args, capture_output=True, text=True, cwd=PROJECT, env=os.environ.copy(), check=False)
     assert cached.stdout.split() == ["0", "False", "False"] and "cached parse" in cached.stderr
+
+
+@pytest.mark.offline
+def test_quickstart_without_data_says_in_one_line_how_to_get_it(tmp_path: Path) -> None:
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    env = {
+        **os.environ,
+        "SKIP_INSTALL": "1",
+        "RD_LAFAN_DIR": str(empty),
+        "RD_RETARGETED_DIR": str(empty),
+        "RD_ARTIFACTS": str(tmp_path / "store"),
+        "RD_LAFAN_URL": f"file://{tmp_path}/no-such-lafan1.zip",
+    }
+    result = subprocess.run(
+        [str(PROJECT / "scripts" / "quickstart.sh")], capture_output=True, text=True, env=env, check=False, timeout=120
+    )
+    assert result.returncode == 1
+    assert result.stdout.splitlines() == ["quickstart: no LAFAN1 data found; downloading it (rd-pipeline fetch-lafan)"]
+    last = result.stderr.splitlines()[-1]
+    assert last.startswith("quickstart: no motion data: run `.venv/bin/rd-pipeline fetch-lafan`")
+    assert "RD_LAFAN_DIR" in last and "RD_RETARGETED_DIR" in last
+    assert "Traceback" not in result.stderr
