@@ -118,6 +118,26 @@ class View:
 
 
 @dataclass(frozen=True)
+class ExportMotion:
+    """Write the reference motion (from `retarget` or `import`, computed or cached) for other stacks."""
+
+    robot: str = DEFAULT_ROBOT
+    """Robot."""
+    motion: str = DEFAULT_MOTION
+    """Motion."""
+    out: Path = Path("motion.csv")
+    """File to write."""
+    format: Literal["csv"] = "csv"
+    """`csv`: the LAFAN1_Retargeting_Dataset layout (root xyz, root quaternion xyzw, joint angles; no header)."""
+    fps: float = 30.0
+    """Frame rate of the written motion (the dataset's is 30)."""
+    profile: str | None = None
+    """Parameter profile whose reference to export."""
+    source: str | None = None
+    """Force the motion source (`bvh` or `csv`)."""
+
+
+@dataclass(frozen=True)
 class FetchLafan:
     """Install the official lafan1.zip into `raw_lafan/` after checking its sha256."""
 
@@ -179,6 +199,7 @@ def main(argv: list[str] | None = None) -> int:
             "stage": StageCommand,
             "status": Status,
             "view": View,
+            "export-motion": ExportMotion,
             "fetch-lafan": FetchLafan,
             "robots": Robots,
             "motions": Motions,
@@ -211,6 +232,7 @@ def _dispatch(command: object, console: Console) -> int:
         StageCommand: commands.stage,
         Status: commands.status,
         View: commands.view,
+        ExportMotion: commands.export_motion,
         FetchLafan: commands.fetch_lafan,
         Robots: commands.robots,
         Motions: commands.motions,

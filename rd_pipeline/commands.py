@@ -20,7 +20,18 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.params import layered_params
 
 if TYPE_CHECKING:
-    from rd_pipeline.cli import Ablate, FetchLafan, Motions, Robots, Run, StageCommand, Status, Sweep, View
+    from rd_pipeline.cli import (
+        Ablate,
+        ExportMotion,
+        FetchLafan,
+        Motions,
+        Robots,
+        Run,
+        StageCommand,
+        Status,
+        Sweep,
+        View,
+    )
 
 
 def _registry():
@@ -190,6 +201,23 @@ def view(cmd: View, console: Console) -> int:
         console.print(f"wrote {path}; open it with `rerun {path}` (pip package rerun-sdk) on a machine with a display")
         if cmd.spawn:
             subprocess.Popen([sys.executable, "-m", "rerun", str(path)])
+    return 0
+
+
+def export_motion(cmd: ExportMotion, console: Console) -> int:
+    from rd_pipeline.export.motion_csv import write_dataset_csv
+    from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+    from rd_pipeline.robots.config import load_robot_config
+
+    if not cmd.fps > 0:
+        raise PipelineError(f"--fps must be positive, got {cmd.fps:g}")
+    pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, cmd.source, None, ())
+    made_by = next(s.name for s in pipeline.chain() if s.provides == "reference")
+    outcomes = execute(pipeline, ArtifactStore(paths.artifacts_dir()), until=made_by, console=console)
+    folder = next(o.path for o in outcomes if o.name == made_by)
+    reference = ReferenceMotion.load(folder / REFERENCE_FILE)
+    rows = write_dataset_csv(reference, load_robot_config(cmd.robot), cmd.out, cmd.fps)
+    console.print(f"wrote {cmd.out}: {rows} rows at {cmd.fps:g} fps from {made_by} {folder.name}", highlight=False)
     return 0
 
 

@@ -1,0 +1,49 @@
+"""A reference motion as a LAFAN1_Retargeting_Dataset CSV, the layout Unitree's tools read.
+
+One row per frame, no header: root position xyz (m), root quaternion xyzw, then one angle (rad) per
+column of the robot's dataset layout (`RobotConfig.csv_joints`). Columns for joints the configured
+model does not have (the 29-DoF G1's waist roll and pitch on the 23-DoF model) are written as 0,
+the pose those joints hold in the model.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.spatial.transform import Rotation, Slerp
+
+from rd_pipeline.motion.reference import ReferenceMotion
+from rd_pipeline.robots.config import RobotConfig
+
+
+def resample_root_and_joints(reference: ReferenceMotion, fps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(root_pos (T', 3), root_quat xyzw (T', 4), joint_pos (T', J)) at `fps`, over the same duration.
+
+    Positions and angles follow a cubic spline through the frames, the root orientation a slerp; the
+    last sample holds the last frame, as the importer does.
+    """
+    source_t = np.arange(reference.n_frames) / reference.fps
+    n_target = round(reference.duration_s * fps)
+    target_t = np.minimum(np.arange(n_target) / fps, source_t[-1])
+    root_pos = CubicSpline(source_t, reference.root_pos, axis=0)(target_t)
+    joint_pos = CubicSpline(source_t, reference.joint_pos, axis=0)(target_t)
+    rotations = Rotation.from_quat(reference.root_quat, scalar_first=True)
+    root_quat = Slerp(source_t, rotations)(target_t).as_quat()
+    return root_pos, root_quat, joint_pos
+
+
+def write_dataset_csv(reference: ReferenceMotion, config: RobotConfig, path: Path, fps: float) -> int:
+    """Write `reference` at `fps` in the dataset layout of `config`; returns the number of rows."""
+    root_pos, root_quat, joint_pos = resample_root_and_joints(reference, fps)
+    columns = np.zeros((len(root_pos), len(config.csv_joints)))
+    for i, name in enumerate(config.csv_joints):
+        if name in reference.joint_names:
+            columns[:, i] = joint_pos[:, reference.joint_names.index(name)]
+    table = np.concatenate([root_pos, root_quat, columns], axis=1)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(f".{path.name}.partial")
+    np.savetxt(partial, table, delimiter=",", fmt="%.9g")
+    partial.replace(path)
+    return len(table)
