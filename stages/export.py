@@ -21,10 +21,12 @@ class ExportParams:
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
+    import numpy as np
     import torch
     from tensordict import TensorDict
 
     from rd_pipeline.export.exporter import build_policy_spec, load_actor, script_actor
+    from rd_pipeline.export.onnx_policy import ONNX_FILE, OnnxPolicy, export_onnx
     from rd_pipeline.export.policy_spec import POLICY_FILE, SPEC_FILE, load_policy_spec
     from rd_pipeline.robots import load_robot
 
@@ -53,10 +55,15 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     )
     spec.save(ctx.out_dir / SPEC_FILE)
     load_policy_spec(ctx.out_dir / SPEC_FILE)  # what we wrote must pass the deploy-side check
+    export_onnx(actor.as_jit().cpu(), metrics["observation_size"], spec, ctx.out_dir / ONNX_FILE)
     probe = torch.zeros(1, metrics["observation_size"])
     with torch.inference_mode():
         expected = actor(TensorDict({"policy": probe}, batch_size=[1]), stochastic_output=False)
         gap = float((scripted(probe) - expected).abs().max())
+        # Normalized observations are O(1); a spread of 3 covers what a rollout feeds the policy.
+        noise = torch.from_numpy(np.random.default_rng(0).normal(0.0, 3.0, (256, metrics["observation_size"])))
+        noise = noise.float()
+        onnx_gap = float(np.abs(OnnxPolicy(ctx.out_dir / ONNX_FILE)(noise.numpy()) - scripted(noise).numpy()).max())
     return {
         "checkpoint_iteration": iteration,
         "observation_size": metrics["observation_size"],
@@ -64,12 +71,13 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         "action_mode": spec.get("action.mode"),
         "reference_key": spec.get("reference.key"),
         "max_abs_diff_on_zero_observation": gap,
+        "onnx_max_abs_diff_vs_torchscript": onnx_gap,
     }
 
 
 STAGE = Stage(
     name="export",
-    version=2,
+    version=3,
     description="trained actor -> policy.pt (TorchScript) + policy.json (gains, scales, mask, obs layout, rates)",
     params=ExportParams,
     provides="deployable_policy",

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.protocol import Protocol
+from rd_pipeline.params import require_positive
 from rd_pipeline.robots.assets import model_files
 
 RECORDING_FILE = "sim2sim.rrd"
@@ -23,6 +24,14 @@ class ValidateParams:
     """Also evaluate on randomized physics, once per seed (empty: nominal only)."""
     bootstrap_seed: int = 0
     """Seeds the bootstrap of the drift CI."""
+    recorded_observations: int = 2000
+    """Observations of the policy's rollouts kept to compare the two runtimes on."""
+    runtime: Literal["torchscript", "onnx"] = "torchscript"
+    """Which exported file runs the loop: `policy.pt` on torch or `policy.onnx` on onnxruntime; the
+    other one is checked against it on the observations the loop recorded."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "recorded_observations")
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
@@ -33,6 +42,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.evaluation.metrics import drift, summarize, t_interval
     from rd_pipeline.evaluation.report import CONTROLLERS, plot_report, write_json, write_markdown
     from rd_pipeline.evaluation.sim2sim import BodySets, randomized_models, run_rollouts
+    from rd_pipeline.export.onnx_policy import ONNX_FILE, OnnxPolicy
     from rd_pipeline.export.policy_spec import POLICY_FILE, SPEC_FILE, load_policy_spec
     from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
     from rd_pipeline.rl.sim_model import pd_simulation_model
@@ -61,10 +71,17 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     )
     scripted = torch.jit.load(str(exported.path / POLICY_FILE))
     torch.set_num_threads(1)  # a small MLP on a few hundred rows; the physics threads want the cores
+    runtimes = {
+        "torchscript": lambda obs: scripted(torch.from_numpy(obs)).numpy(),
+        "onnx": OnnxPolicy(exported.path / ONNX_FILE),
+    }
+    recorded: list[np.ndarray] = []
 
     def policy(obs: np.ndarray) -> np.ndarray:
+        if sum(len(o) for o in recorded) < p.recorded_observations:
+            recorded.append(obs.copy())
         with torch.inference_mode():
-            return scripted(torch.from_numpy(obs)).numpy().astype(np.float64)
+            return runtimes[p.runtime](obs).astype(np.float64)
 
     specs = {"policy": spec, "zero_action": reference_baseline_spec(spec)}
     joints = len(spec.get("joints.policy"))
@@ -111,6 +128,9 @@ def _run(ctx: StageContext) -> dict[str, Any]:
                 },
             }
 
+    observations = np.concatenate(recorded)[: p.recorded_observations]
+    with torch.inference_mode():
+        runtime_gap = float(np.abs(runtimes["onnx"](observations) - runtimes["torchscript"](observations)).max())
     report = {
         "robot": ctx.robot,
         "motion": ctx.motion,
@@ -130,6 +150,11 @@ def _run(ctx: StageContext) -> dict[str, Any]:
             "orientation_limit_rad": p.protocol.orientation_limit_rad,
         },
         "nominal": nominal,
+        "runtime": {
+            "ran": p.runtime,
+            "observations_compared": len(observations),
+            "onnx_vs_torchscript_max_abs_diff": runtime_gap,
+        },
         **({"randomized": randomized} if randomized else {}),
     }
     write_json(report, ctx.out_dir)
@@ -154,12 +179,14 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         "zero_action_mean_survival_s": zero["fixed_grid"]["mean_survival_s"],
         "E_g_mpbpe": pol["fixed_grid"]["E_g_mpbpe"],
         "E_mpjpe": pol["fixed_grid"]["E_mpjpe"],
+        "runtime": p.runtime,
+        "onnx_vs_torchscript_max_abs_diff": runtime_gap,
     }
 
 
 STAGE = Stage(
     name="validate",
-    version=2,
+    version=3,
     description="exported policy + reference -> sim2sim report (report.json/md, plots, .rrd) beside zero-action",
     params=ValidateParams,
     provides="validation_report",

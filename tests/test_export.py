@@ -17,6 +17,7 @@ from tensordict import TensorDict
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.deploy import DeployController
 from rd_pipeline.export.exporter import build_policy_spec, load_actor, script_actor
+from rd_pipeline.export.onnx_policy import OnnxPolicy
 from rd_pipeline.export.policy_spec import load_policy_spec
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
@@ -148,6 +149,22 @@ def test_smoke_profile_trains_exports_and_validates(robot: str, motion: str, art
     for name in ("report.md", "drift.png", "survival_per_start.png", "sim2sim.rrd"):
         assert (validate / name).stat().st_size > 0, name
     assert "| zero_action |" in (validate / "report.md").read_text()
+    # policy.onnx: the same function as policy.pt on what the loop fed it, labelled like policy.json.
+    assert report["runtime"]["onnx_vs_torchscript_max_abs_diff"] < 1e-5
+    assert report["runtime"]["observations_compared"] == 2000
+    metadata = OnnxPolicy(export / "policy.onnx").metadata
+    assert metadata["joint_names"].split(",") == spec.get("joints.policy")
+    assert metadata["action_semantics"].split(",") == spec.get("action.semantics")
+    assert float(metadata["action_scale"]) == spec.get("action.scale")
+    onnx_run = cli("run", "--robot", robot, "--motion", motion, "--profile", "smoke", "--set", "validate.runtime=onnx")
+    assert onnx_run.returncode == 0, onnx_run.stderr
+    (onnx_validate,) = [f for f in (artifacts / "validate" / robot / motion).iterdir() if f != validate]
+    on_onnx = json.loads((onnx_validate / "report.json").read_text())
+    assert on_onnx["runtime"]["ran"] == "onnx"
+    for protocol in ("fixed_grid", "start_zero"):
+        assert on_onnx["nominal"]["policy"][protocol]["mean_survival_s"] == pytest.approx(
+            report["nominal"]["policy"][protocol]["mean_survival_s"], abs=0.02 + 1e-9
+        )
     if robot == "g1":  # `view` puts the tracked robot beside the human and the reference once validated
         out = artifacts.parent / "view.rrd"
         assert (
