@@ -127,10 +127,11 @@ class ExportMotion:
     """Motion."""
     out: Path = Path("motion.csv")
     """File to write."""
-    format: Literal["csv"] = "csv"
-    """`csv`: the LAFAN1_Retargeting_Dataset layout (root xyz, root quaternion xyzw, joint angles; no header)."""
-    fps: float = 30.0
-    """Frame rate of the written motion (the dataset's is 30)."""
+    format: Literal["csv", "mjlab"] = "csv"
+    """`csv`: the LAFAN1_Retargeting_Dataset layout (root xyz, root quaternion xyzw, joint angles; no
+    header); `mjlab`: the npz of mjlab's and BeyondMimic's motion loaders."""
+    fps: float | None = None
+    """Frame rate of the written motion (default: 30 for csv, the dataset's; the reference's 50 for mjlab)."""
     profile: str | None = None
     """Parameter profile whose reference to export."""
     source: str | None = None

@@ -206,18 +206,25 @@ def view(cmd: View, console: Console) -> int:
 
 def export_motion(cmd: ExportMotion, console: Console) -> int:
     from rd_pipeline.export.motion_csv import write_dataset_csv
+    from rd_pipeline.export.motion_mjlab import write_mjlab_npz
     from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
-    from rd_pipeline.robots.config import load_robot_config
+    from rd_pipeline.robots import load_robot
 
-    if not cmd.fps > 0:
+    if cmd.fps is not None and not cmd.fps > 0:
         raise PipelineError(f"--fps must be positive, got {cmd.fps:g}")
     pipeline = _pipeline(cmd.robot, cmd.motion, cmd.profile, cmd.source, None, ())
     made_by = next(s.name for s in pipeline.chain() if s.provides == "reference")
     outcomes = execute(pipeline, ArtifactStore(paths.artifacts_dir()), until=made_by, console=console)
     folder = next(o.path for o in outcomes if o.name == made_by)
     reference = ReferenceMotion.load(folder / REFERENCE_FILE)
-    rows = write_dataset_csv(reference, load_robot_config(cmd.robot), cmd.out, cmd.fps)
-    console.print(f"wrote {cmd.out}: {rows} rows at {cmd.fps:g} fps from {made_by} {folder.name}", highlight=False)
+    robot = load_robot(cmd.robot)
+    if cmd.format == "csv":
+        fps = cmd.fps or 30.0
+        frames = write_dataset_csv(reference, robot.config, cmd.out, fps)
+    else:
+        fps = cmd.fps or reference.fps
+        frames = write_mjlab_npz(reference, robot, cmd.out, fps)
+    console.print(f"wrote {cmd.out}: {frames} frames at {fps:g} fps from {made_by} {folder.name}", highlight=False)
     return 0
 
 

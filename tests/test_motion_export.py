@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import mujoco
 import numpy as np
 import pytest
 from conftest import RETARGETED_DIR, cli
@@ -55,3 +56,42 @@ def test_csv_has_the_dataset_layout(artifacts: Path, tmp_path: Path) -> None:
 def test_a_bad_rate_is_one_line(artifacts: Path, tmp_path: Path) -> None:
     result = cli("export-motion", "--robot", "h1", "--motion", "dance2_subject3", "--fps", "0", "--out", "x.csv")
     assert result.returncode == 2 and result.stderr.strip().endswith("error: --fps must be positive, got 0")
+
+
+@pytest.mark.parametrize(("robot_name", "fps"), [("g1", None), ("h1_2", 30.0)])
+def test_mjlab_npz_follows_the_model_order_and_its_own_kinematics(
+    robot_name: str, fps: float | None, artifacts: Path, tmp_path: Path
+) -> None:
+    """The contract of mjlab's `MotionLoader`: joints in the model's hinge order, every body but the
+    world in the model's order, wxyz quaternions; checked by forward kinematics on the model."""
+    motion = {"g1": "dance1_subject2", "h1_2": "dance2_subject4"}[robot_name]
+    out = tmp_path / f"{robot_name}.npz"
+    args = ["export-motion", "--robot", robot_name, "--motion", motion, "--source", "csv", "--format", "mjlab"]
+    result = cli(*args, "--out", str(out), *(["--fps", str(fps)] if fps else []))
+    assert result.returncode == 0, result.stderr
+    robot = load_robot(robot_name)
+    model = robot.model
+    data = np.load(out)
+    hinges = [model.joint(i).name for i in range(model.njnt) if model.jnt_type[i] == mujoco.mjtJoint.mjJNT_HINGE]
+    assert list(data["joint_names"]) == hinges
+    assert list(data["body_names"]) == [model.body(i).name for i in range(1, model.nbody)]
+    duration = {"g1": 131.5, "h1_2": 225.7}[robot_name]
+    frames = round(duration * (fps or 50.0))
+    assert float(data["fps"][0]) == (fps or 50.0)
+    assert data["joint_pos"].shape == data["joint_vel"].shape == (frames, len(hinges))
+    for key in ("body_pos_w", "body_lin_vel_w", "body_ang_vel_w"):
+        assert data[key].shape == (frames, model.nbody - 1, 3)
+    assert data["body_quat_w"].shape == (frames, model.nbody - 1, 4)
+    state = mujoco.MjData(model)
+    for t in np.linspace(0, frames - 1, 7).astype(int):
+        state.qpos[:3] = data["body_pos_w"][t, 0]
+        state.qpos[3:7] = data["body_quat_w"][t, 0]
+        for name, angle in zip(hinges, data["joint_pos"][t]):
+            state.qpos[model.jnt_qposadr[model.joint(name).id]] = angle
+        mujoco.mj_kinematics(model, state)
+        np.testing.assert_allclose(state.xpos[1:], data["body_pos_w"][t], atol=1e-5)
+        np.testing.assert_allclose(np.abs(np.sum(state.xquat[1:] * data["body_quat_w"][t], axis=-1)), 1.0, atol=1e-5)
+    # Velocities are those of the positions: finite differences over one frame.
+    dt = 1.0 / (fps or 50.0)
+    moved = (data["body_pos_w"][2:] - data["body_pos_w"][:-2]) / (2 * dt)
+    assert np.median(np.abs(moved - data["body_lin_vel_w"][1:-1])) < 1e-3
