@@ -200,7 +200,13 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_curves(result: dict, path: Path) -> None:
+def smoothed(values: np.ndarray, window: int) -> np.ndarray:
+    """Moving mean over `window` iterations along the last axis (the first window - 1 are dropped)."""
+    kernel = np.ones(window) / window
+    return np.apply_along_axis(lambda row: np.convolve(row, kernel, mode="valid"), -1, values)
+
+
+def plot_curves(result: dict, path: Path, window: int) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -213,9 +219,9 @@ def plot_curves(result: dict, path: Path) -> None:
         if not curves:
             continue
         length = min(len(c["iteration"]) for c in curves)
-        iterations = np.asarray(curves[0]["iteration"][:length])
+        iterations = np.asarray(curves[0]["iteration"][window - 1 : length])
         for ax, key in zip(axes, ("episode_length_s", "reward"), strict=True):
-            values = np.asarray([c[key][:length] for c in curves])
+            values = smoothed(np.asarray([c[key][:length] for c in curves]), window)
             mean = values.mean(axis=0)
             ax.plot(iterations, mean, lw=1, label=f"{arm['arm']} (n={len(curves)})")
             if len(curves) > 1:
@@ -226,17 +232,19 @@ def plot_curves(result: dict, path: Path) -> None:
     for ax in axes:
         ax.set_xlabel("iteration")
     axes[0].legend(fontsize=7)
-    fig.suptitle(f"{result['robot']} {result['clip']}: mean and 95 % CI over seeds", fontsize=9)
+    fig.suptitle(
+        f"{result['robot']} {result['clip']}: mean and 95 % CI over seeds ({window}-iteration moving mean)", fontsize=9
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
-def write(result: dict, out: Path) -> None:
+def write(result: dict, out: Path, window: int) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
     out.with_suffix(".md").write_text(markdown(result))
-    plot_curves(result, out.parent / f"{out.name}_curves.png")
+    plot_curves(result, out.parent / f"{out.name}_curves.png", window)
 
 
 def main() -> None:
@@ -249,13 +257,14 @@ def main() -> None:
     parser.add_argument("--set", nargs="*", default=[], help="overrides for every trial")
     parser.add_argument("--out", type=Path, default=Path("bench/results/residual_study"))
     parser.add_argument("--collect", action="store_true", help="only rewrite the results from finished trials")
+    parser.add_argument("--smooth", type=int, default=25, help="moving-mean window of the curves, in iterations")
     args = parser.parse_args()
     if not args.collect:
         for trial in trials(args):
             if seed_result(trial, args.profile) is None and not run(trial, args):
                 print(f"{trial.label}: failed (see the output above); going on", flush=True)
-            write(summary(args), args.out)
-    write(summary(args), args.out)
+            write(summary(args), args.out, args.smooth)
+    write(summary(args), args.out, args.smooth)
     print(f"wrote {args.out.with_suffix('.json')}")
 
 
