@@ -1,24 +1,28 @@
-"""Benchmark: the paper's residual study (learning-curve figure and Table r5) at CPU scale.
+"""Benchmark: the paper's ablations at CPU scale, with their learning curves.
 
-    python bench/residual_study.py [--arms absolute selective all reference_locked] [--seeds 0 1 2] \
-        [--motion dance1_subject2] [--clip 0:10] [--profile cpu] [--set stage.param=value ...] \
-        [--out bench/results/residual_study]
+    python bench/ablation_study.py residual [--arms absolute selective all reference_locked] [--seeds 0 1 2] \
+        [--motion dance1_subject2] [--clip 0:10] [--profile cpu] [--set stage.param=value ...]
+    python bench/ablation_study.py sampler --clip 0:20 [--seeds 0 1] ...
 
-Runs `rd-pipeline ablate residual` one trial at a time, seed by seed (every arm has its first seed
+`residual` is the residual-mask study (the paper's learning-curve figure and Table r5), `sampler`
+the resampling ablation (its threshold-success and survival table, plus each arm's sampler profile).
+Runs `rd-pipeline ablate <study>` one trial at a time, seed by seed (every arm has its first seed
 before any arm has its second), always with `--resume`: a finished trial is cached in the artifact
 store and an interrupted training continues from its last checkpoint, so rerunning the same
 command continues the study. After every trial it rewrites `<out>.json`, `<out>.md` and
-`<out>_curves.png` from the artifacts of the trials finished so far. Validation figures come from
-each trial's `validate` report (the exported policy on the full mesh model); a seed's wall time is
-its train stage's.
+`<out>_curves.png` (default out: `bench/results/<study>_study`) from the artifacts of the trials
+finished so far. Validation figures come from each trial's `validate` report (the exported policy on
+the full mesh model); a seed's wall time is its train stage's.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,8 +34,6 @@ from rd_pipeline.sweeps.ablation import STUDIES
 from rd_pipeline.sweeps.runner import Trial
 
 ROBOT = "g1"
-VALIDATION = ("start_zero_s", "completion_pct", "mean_survival_s", *ERROR_METRICS)
-"""Table columns: start-zero survival, then the nominal policy's fixed-grid figures."""
 PAPER_TABLE_R5 = {
     "absolute": {
         "completion_pct": "23.6 ± 3.9",
@@ -53,6 +55,62 @@ PAPER_TABLE_R5 = {
     },
 }
 """The paper's Table r5 (dance2_subject4, 3 seeds, 226 fixed starts, GPU scale), quoted for comparison."""
+PAPER_RESAMPLING = {
+    "uniform": {"success_10s_pct": "62.2 ± 10.2", "success_20s_pct": "29.9 ± 12.3", "success_30s_pct": "10.0 ± 9.2"},
+    "distribution": {"success_10s_pct": "65.5 ± 3.8", "success_20s_pct": "37.3 ± 4.2", "success_30s_pct": "18.6 ± 4.0"},
+    "failure": {"success_10s_pct": "69.8 ± 13.4", "success_20s_pct": "40.4 ± 21.6", "success_30s_pct": "22.0 ± 24.5"},
+    "combined": {"success_10s_pct": "72.4 ± 3.4", "success_20s_pct": "45.7 ± 4.4", "success_30s_pct": "26.1 ± 6.7"},
+}
+"""The paper's resampling table (a), threshold success (dance2_subject4, 3 seeds, GPU scale)."""
+
+
+@dataclass(frozen=True)
+class StudySpec:
+    """What one ablation runs and reports."""
+
+    title: str
+    """Heading of the markdown report."""
+    arms: tuple[str, ...]
+    """Default arms."""
+    seeds: tuple[int, ...]
+    """Default seeds."""
+    columns: tuple[str, ...]
+    """Table columns: start-zero survival, then the nominal policy's fixed-grid figures."""
+    paper: dict[str, dict[str, str]]
+    """The paper's figures for the same arms, quoted for orientation."""
+    paper_caption: str
+    """What the quoted figures are."""
+
+
+SPECS = {
+    "residual": StudySpec(
+        title="Residual study at CPU scale (the paper's Table r5 and learning-curve figure)",
+        arms=("absolute", "selective", "all", "reference_locked"),
+        seeds=(0, 1, 2),
+        columns=("start_zero_s", "completion_pct", "mean_survival_s", *ERROR_METRICS),
+        paper=PAPER_TABLE_R5,
+        paper_caption="The paper's Table r5 (dance2_subject4, GPU scale; survival in s, errors in mm/mrad), "
+        "for orientation only: a different motion and budget.",
+    ),
+    "sampler": StudySpec(
+        title="Sampler ablation at CPU scale (the paper's resampling table)",
+        arms=("uniform", "distribution", "failure", "combined"),
+        seeds=(0, 1),
+        columns=(
+            "start_zero_s",
+            "completion_pct",
+            "mean_survival_s",
+            "success_10s_pct",
+            "success_20s_pct",
+            "success_30s_pct",
+        ),
+        paper=PAPER_RESAMPLING,
+        paper_caption="The paper's resampling table (a), threshold success in % (dance2_subject4, GPU scale), "
+        "for orientation only: a different motion and budget.",
+    ),
+}
+PROFILE_FILE = "sampler_profile.png"
+"""The train stage's plot of the sampler's failure rates and probabilities."""
 
 
 def shared_sets(args: argparse.Namespace) -> tuple[str, ...]:
@@ -62,7 +120,7 @@ def shared_sets(args: argparse.Namespace) -> tuple[str, ...]:
 
 def trials(args: argparse.Namespace) -> list[Trial]:
     return [
-        Trial(ROBOT, args.motion, seed, arm, shared_sets(args) + STUDIES["residual"][arm])
+        Trial(ROBOT, args.motion, seed, arm, shared_sets(args) + STUDIES[args.study][arm])
         for seed in args.seeds
         for arm in args.arms
     ]
@@ -74,7 +132,7 @@ def run(trial: Trial, args: argparse.Namespace) -> bool:
         "-m",
         "rd_pipeline",
         "ablate",
-        "residual",
+        args.study,
         "--robots",
         ROBOT,
         "--motions",
@@ -95,10 +153,10 @@ def run(trial: Trial, args: argparse.Namespace) -> bool:
     return subprocess.run(command, check=False).returncode == 0
 
 
-def seed_result(trial: Trial, profile: str) -> dict | None:
+def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
     """One seed's row, or None while its trial has not finished."""
-    train = trial_artifact(trial, profile, "train")
-    validate = trial_artifact(trial, profile, "validate")
+    train = trial_artifact(trial, args.profile, "train")
+    validate = trial_artifact(trial, args.profile, "validate")
     if train is None or validate is None:
         return None
     report = json.loads((validate / "report.json").read_text())["nominal"]["policy"]
@@ -107,10 +165,11 @@ def seed_result(trial: Trial, profile: str) -> dict | None:
     row = {
         "seed": trial.seed,
         "start_zero_s": report["start_zero"]["mean_survival_s"],
-        **{m: report["fixed_grid"][m] for m in VALIDATION[1:]},
+        **{m: report["fixed_grid"][m] for m in SPECS[args.study].columns[1:]},
         "wall_min": round(manifest["duration_s"] / 60, 2),
         "samples": params["iterations"] * params["env"]["num_envs"] * params["ppo"]["steps_per_env"],
         "train_key": manifest["key"],
+        "train_folder": str(train),
     }
     log = [json.loads(line) for line in (train / LOG_FILE).read_text().splitlines()]
     row["curve"] = {
@@ -128,13 +187,14 @@ def summary(args: argparse.Namespace) -> dict:
         seeds = []
         for trial in trials(args):
             if trial.variant == arm:
-                row = seed_result(trial, args.profile)
+                row = seed_result(trial, args)
                 if row is not None:
                     seeds.append(row)
                     samples.add(row["samples"])
-        table = {m: t_interval([s[m] for s in seeds]) for m in (*VALIDATION, "wall_min")}
+        table = {m: t_interval([s[m] for s in seeds]) for m in (*SPECS[args.study].columns, "wall_min")}
         arms.append({"arm": arm, "seeds": seeds, "table": table})
     return {
+        "study": args.study,
         "robot": ROBOT,
         "clip": f"{args.motion} {args.clip} s",
         "profile": args.profile,
@@ -151,53 +211,46 @@ def _cell(cell: dict) -> str:
 
 
 def markdown(result: dict) -> str:
-    header = ["arm", "n", *VALIDATION, "train min"]
+    spec = SPECS[result["study"]]
+    columns = (*spec.columns, "wall_min")
     lines = [
-        "# Residual study at CPU scale (the paper's Table r5 and learning-curve figure)",
+        f"# {spec.title}",
         "",
         (
             f"{result['robot']}, {result['clip']}, `{result['profile']}` profile, "
-            f"{result['samples_per_trial']} samples per trial. Written by `bench/residual_study.py`."
+            f"{result['samples_per_trial']} samples per trial. Written by `bench/ablation_study.py`."
         ),
         "",
         (
             "Mean ± 95 % Student-t half-width over seeds. start_zero_s: one deterministic rollout from frame 0; "
-            "the other columns: the fixed grid of starts (one per second), nominal physics, full mesh model."
+            "the other columns: the fixed grid of starts (one per second), nominal physics, full mesh model; "
+            "wall_min: the train stage's minutes."
         ),
         "",
-        "| " + " | ".join(header) + " |",
-        "|" + "---|" * len(header),
+        "| arm | n | " + " | ".join(columns) + " |",
+        "|" + "---|" * (len(columns) + 2),
     ]
     for arm in result["arms"]:
-        table = arm["table"]
-        cells = [_cell(table[m]) for m in (*VALIDATION, "wall_min")]
-        lines.append(f"| {arm['arm']} | {len(arm['seeds'])} | " + " | ".join(cells) + " |")
-    lines += [
-        "",
-        "Per seed:",
-        "",
-        "| arm | seed | " + " | ".join(VALIDATION) + " | train min |",
-        "|" + "---|" * (len(VALIDATION) + 3),
-    ]
+        cells = " | ".join(_cell(arm["table"][m]) for m in columns)
+        lines.append(f"| {arm['arm']} | {len(arm['seeds'])} | {cells} |")
+    lines += ["", "Per seed:", "", "| arm | seed | " + " | ".join(columns) + " |", "|" + "---|" * (len(columns) + 2)]
     for arm in result["arms"]:
         for s in arm["seeds"]:
-            values = " | ".join(f"{s[m]}" for m in (*VALIDATION, "wall_min"))
+            values = " | ".join(f"{s[m]}" for m in columns)
             lines.append(f"| {arm['arm']} | {s['seed']} | {values} |")
-    lines += [
-        "",
-        (
-            "The paper's Table r5 (dance2_subject4, GPU scale; survival in s, errors in mm/mrad), for "
-            "orientation only: a different motion and budget."
-        ),
-        "",
-        "| arm | completion % | survival s | MPBPE | MPJPE |",
-        "|---|---|---|---|---|",
-    ]
-    for arm, row in PAPER_TABLE_R5.items():
-        lines.append(
-            f"| {arm} | {row['completion_pct']} | {row['mean_survival_s']} | {row['E_mpbpe']} | {row['E_mpjpe']} |"
-        )
+    quoted = sorted({column for row in spec.paper.values() for column in row}, key=columns.index)
+    lines += ["", spec.paper_caption, "", "| arm | " + " | ".join(quoted) + " |", "|" + "---|" * (len(quoted) + 1)]
+    for arm, row in spec.paper.items():
+        lines.append(f"| {arm} | " + " | ".join(row.get(c, "–") for c in quoted) + " |")
     return "\n".join(lines) + "\n"
+
+
+def copy_sampler_profiles(result: dict, out: Path) -> None:
+    """Each arm's first seed's sampler profile beside the results (artifacts are not committed)."""
+    for arm in result["arms"]:
+        if arm["seeds"]:
+            source = Path(arm["seeds"][0]["train_folder"]) / PROFILE_FILE
+            shutil.copyfile(source, out.parent / f"{out.name}_profile_{arm['arm']}.png")
 
 
 def smoothed(values: np.ndarray, window: int) -> np.ndarray:
@@ -219,9 +272,10 @@ def plot_curves(result: dict, path: Path, window: int) -> None:
         if not curves:
             continue
         length = min(len(c["iteration"]) for c in curves)
-        iterations = np.asarray(curves[0]["iteration"][window - 1 : length])
+        span = min(window, length)  # a run shorter than the window is drawn unsmoothed
+        iterations = np.asarray(curves[0]["iteration"][span - 1 : length])
         for ax, key in zip(axes, ("episode_length_s", "reward"), strict=True):
-            values = smoothed(np.asarray([c[key][:length] for c in curves]), window)
+            values = smoothed(np.asarray([c[key][:length] for c in curves]), span)
             mean = values.mean(axis=0)
             ax.plot(iterations, mean, lw=1, label=f"{arm['arm']} (n={len(curves)})")
             if len(curves) > 1:
@@ -245,23 +299,30 @@ def write(result: dict, out: Path, window: int) -> None:
     out.with_suffix(".json").write_text(json.dumps(result, indent=1) + "\n")
     out.with_suffix(".md").write_text(markdown(result))
     plot_curves(result, out.parent / f"{out.name}_curves.png", window)
+    if result["study"] == "sampler":
+        copy_sampler_profiles(result, out)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--arms", nargs="+", default=["absolute", "selective", "all", "reference_locked"])
-    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    parser.add_argument("study", choices=sorted(SPECS))
+    parser.add_argument("--arms", nargs="+", help="default: the study's arms")
+    parser.add_argument("--seeds", nargs="+", type=int, help="default: 0 1 2 (residual), 0 1 (sampler)")
     parser.add_argument("--motion", default="dance1_subject2")
     parser.add_argument("--clip", default="0:10")
     parser.add_argument("--profile", default="cpu")
     parser.add_argument("--set", nargs="*", default=[], help="overrides for every trial")
-    parser.add_argument("--out", type=Path, default=Path("bench/results/residual_study"))
+    parser.add_argument("--out", type=Path, help="default: bench/results/<study>_study")
     parser.add_argument("--collect", action="store_true", help="only rewrite the results from finished trials")
     parser.add_argument("--smooth", type=int, default=25, help="moving-mean window of the curves, in iterations")
     args = parser.parse_args()
+    spec = SPECS[args.study]
+    args.arms = args.arms or list(spec.arms)
+    args.seeds = args.seeds or list(spec.seeds)
+    args.out = args.out or Path(f"bench/results/{args.study}_study")
     if not args.collect:
         for trial in trials(args):
-            if seed_result(trial, args.profile) is None and not run(trial, args):
+            if seed_result(trial, args) is None and not run(trial, args):
                 print(f"{trial.label}: failed (see the output above); going on", flush=True)
             write(summary(args), args.out, args.smooth)
     write(summary(args), args.out, args.smooth)
