@@ -1,0 +1,79 @@
+"""Benchmark: one long clip learned on this machine (selective residuals, combined sampler, `cpu` profile).
+
+    python bench/learning_long.py --clip 0:30 [--iterations 2800] [--motion dance1_subject2] \
+        [--set stage.param=value ...] [--out bench/results/learning_30s]
+
+Runs `rd-pipeline run` with `--resume` (an interrupted training continues from its last checkpoint;
+a finished one is cached), then writes `<out>.json` (`clip_s`, `start_zero_s`, `completion_pct`,
+`wall_min`, `samples`, the validation figures), and copies the learning curve, the sampler profile
+and the validation report beside it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from rd_pipeline.commands import trial_artifact
+from rd_pipeline.sweeps.runner import Trial
+
+ROBOT = "g1"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--clip", default="0:30")
+    parser.add_argument("--iterations", type=int, default=2800)
+    parser.add_argument("--motion", default="dance1_subject2")
+    parser.add_argument("--profile", default="cpu")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--set", nargs="*", default=[], help="further overrides")
+    parser.add_argument("--out", type=Path, default=Path("bench/results/learning_30s"))
+    args = parser.parse_args()
+    sets = (f"train.clip={args.clip}", f"train.iterations={args.iterations}", *args.set)
+    command = [sys.executable, "-m", "rd_pipeline", "run", "--robot", ROBOT, "--motion", args.motion]
+    command += ["--profile", args.profile, "--seed", str(args.seed), "--resume", "--set", *sets]
+    if subprocess.run(command, check=False).returncode != 0:
+        sys.exit(1)
+    trial = Trial(ROBOT, args.motion, args.seed, "long", sets)
+    train = trial_artifact(trial, args.profile, "train")
+    validate = trial_artifact(trial, args.profile, "validate")
+    manifest = json.loads((train / "manifest.json").read_text())
+    report = json.loads((validate / "report.json").read_text())
+    policy = report["nominal"]["policy"]
+    params = manifest["params"]
+    result = {
+        "robot": ROBOT,
+        "motion": args.motion,
+        "clip": args.clip,
+        "clip_s": report["reference"]["duration_s"],
+        "start_zero_s": policy["start_zero"]["mean_survival_s"],
+        "completion_pct": policy["fixed_grid"]["completion_pct"],
+        "mean_survival_s": policy["fixed_grid"]["mean_survival_s"],
+        "E_g_mpbpe": policy["fixed_grid"]["E_g_mpbpe"],
+        "E_mpbpe": policy["fixed_grid"]["E_mpbpe"],
+        "zero_action_start_zero_s": report["nominal"]["zero_action"]["start_zero"]["mean_survival_s"],
+        "wall_min": round(manifest["duration_s"] / 60, 2),
+        "samples": params["iterations"] * params["env"]["num_envs"] * params["ppo"]["steps_per_env"],
+        "action_mode": params["env"]["actions"]["mode"],
+        "sampler": params["sampler"]["mode"],
+        "train_key": manifest["key"],
+        "export_key": report["policy_key"],
+    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
+    for source, suffix in (
+        (train / "learning_curve.png", "_curve.png"),
+        (train / "sampler_profile.png", "_sampler_profile.png"),
+        (validate / "report.md", "_validation.md"),
+    ):
+        shutil.copyfile(source, args.out.parent / f"{args.out.name}{suffix}")
+    print(json.dumps(result, indent=2))
+
+
+if __name__ == "__main__":
+    main()
