@@ -95,3 +95,38 @@ def test_mjlab_npz_follows_the_model_order_and_its_own_kinematics(
     dt = 1.0 / (fps or 50.0)
     moved = (data["body_pos_w"][2:] - data["body_pos_w"][:-2]) / (2 * dt)
     assert np.median(np.abs(moved - data["body_lin_vel_w"][1:-1])) < 1e-3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("robot_name", "motion", "source", "made_by"),
+    [
+        ("g1", "dance1_subject1", "bvh", "retarget"),
+        ("h1", "dance2_subject3", "csv", "import"),
+        ("h1_2", "dance2_subject4", "csv", "import"),
+    ],
+)
+def test_every_robot_exports_both_formats(
+    robot_name: str, motion: str, source: str, made_by: str, artifacts: Path, tmp_path: Path
+) -> None:
+    robot = load_robot(robot_name)
+    for fmt, suffix in (("csv", "csv"), ("mjlab", "npz")):
+        out = tmp_path / f"{robot_name}.{suffix}"
+        result = cli(
+            "export-motion",
+            "--robot",
+            robot_name,
+            "--motion",
+            motion,
+            "--source",
+            source,
+            "--format",
+            fmt,
+            "--out",
+            str(out),
+        )
+        assert result.returncode == 0, result.stderr
+        assert f"from {made_by} " in result.stderr
+    columns = np.loadtxt(tmp_path / f"{robot_name}.csv", delimiter=",").shape[1]
+    assert columns == 7 + len(robot.config.csv_joints)
+    assert np.load(tmp_path / f"{robot_name}.npz")["joint_pos"].shape[1] == len(robot.config.joint_names)
