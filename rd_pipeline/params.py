@@ -30,6 +30,14 @@ def require_positive(params: object, *fields: str) -> None:
             raise ParamRangeError(field, f"must be positive, got {value}")
 
 
+def require_at_most(params: object, limit: float, *fields: str) -> None:
+    """Raise `ParamRangeError` for the first of `fields` of `params` above `limit`."""
+    for field in fields:
+        value = getattr(params, field)
+        if value > limit:
+            raise ParamRangeError(field, f"must be at most {limit:g}, got {value}")
+
+
 def read_params_file(path: Path, stage_names: list[str]) -> tuple[str | None, dict[str, dict[str, Any]]]:
     """(profile, per-stage values) from a DVC-style params file with a `stages:` table."""
     try:

@@ -65,6 +65,25 @@ def test_a_choice_outside_its_literal_is_refused_when_params_are_read(artifacts:
         ("train.env.num_envs=0", "parameter 'train.env.num_envs' must be positive, got 0"),
         ("retarget.fps=-50", "parameter 'retarget.fps' must be positive, got -50.0"),
         ("train.seed=1.5", "parameter 'train.seed' must be an integer, got '1.5'"),
+        ("train.ppo.gamma=1.5", "parameter 'train.ppo.gamma' must be at most 1, got 1.5"),
+        (
+            "train.env.rewards.body_pos.sigma=0",
+            "parameter 'train.env.rewards.body_pos.sigma' must be positive, got 0.0",
+        ),
+        (
+            "train.env.rewards.torque.weight=0.5",
+            "parameter 'train.env.rewards.torque.weight' must be at most 0 like its default, got 0.5",
+        ),
+        (
+            "retarget.weights.feet_position=-1",
+            "parameter 'retarget.weights.feet_position' must be at least 0, got -1.0",
+        ),
+        ("train.ppo.lam=nan", "parameter 'train.ppo.lam' must be finite, got nan"),
+        (
+            "train.env.randomization.mass_factor=-1,1",
+            "parameter 'train.env.randomization.mass_factor' must be at least 0, got -1.0",
+        ),
+        ("validate.protocol.grid_s=0", "parameter 'validate.protocol.grid_s' must be positive, got 0.0"),
     ],
 )
 def test_out_of_range_params_are_one_line_naming_the_parameter(assignment: str, message: str, artifacts: Path) -> None:

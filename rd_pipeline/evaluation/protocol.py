@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from rd_pipeline.params import require_positive
+
 
 @dataclass(frozen=True)
 class Protocol:
@@ -17,3 +19,6 @@ class Protocol:
     """Failure: pelvis gravity direction this far from the reference's."""
     threads: int = 2
     """Threads stepping the rollouts' physics."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "grid_s", "motion_far_m", "orientation_limit_rad", "threads")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from rd_pipeline.params import require_at_most, require_positive
+
 
 @dataclass(frozen=True)
 class PpoConfig:
@@ -35,3 +37,17 @@ class PpoConfig:
     """Initial action-noise std (variance 0.8)."""
     hidden_dims: tuple[int, ...] = (512, 256, 128)
     """Actor and critic MLP widths (ReLU)."""
+
+    def __post_init__(self) -> None:
+        require_positive(
+            self,
+            "steps_per_env",
+            "learning_epochs",
+            "mini_batches",
+            "clip",
+            "learning_rate",
+            "max_grad_norm",
+            "desired_kl",
+            "init_noise_std",
+        )
+        require_at_most(self, 1.0, "gamma", "lam")

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from rd_pipeline.lazy import lazy_import
+from rd_pipeline.params import require_positive
 
 torch = lazy_import("torch")
 
@@ -95,6 +96,9 @@ class TrackingTerm:
     """Reward at zero error."""
     sigma: float
     """Kernel width (the adaptive-sigma curriculum starts here and only tightens)."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "sigma")
 
 
 @dataclass(frozen=True)
