@@ -67,6 +67,7 @@ def main() -> None:
             for name, call in calls.items():
                 times[name] += time_calls(call, BLOCK)
     result = {
+        "policy": args.policy.name,
         "robot": spec.get("robot"),
         "observation_size": spec.get("observation.size"),
         "actions": len(spec.get("action.outputs")),
