@@ -27,10 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
+from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.commands import trial_artifact
 from rd_pipeline.evaluation.metrics import ERROR_METRICS, t_interval
+from rd_pipeline.evaluation.report import REPORT_JSON
 from rd_pipeline.rl.trainer import LOG_FILE
-from rd_pipeline.sweeps.ablation import STUDIES
+from rd_pipeline.stages.train import PROFILE_FILE
+from rd_pipeline.sweeps.ablation import STUDIES, format_cell
 from rd_pipeline.sweeps.runner import Trial
 
 ROBOT = "g1"
@@ -109,8 +112,6 @@ SPECS = {
         "for orientation only: a different motion and budget.",
     ),
 }
-PROFILE_FILE = "sampler_profile.png"
-"""The train stage's plot of the sampler's failure rates and probabilities."""
 
 
 def shared_sets(args: argparse.Namespace) -> tuple[str, ...]:
@@ -159,8 +160,8 @@ def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
     validate = trial_artifact(trial, args.profile, "validate")
     if train is None or validate is None:
         return None
-    report = json.loads((validate / "report.json").read_text())["nominal"]["policy"]
-    manifest = json.loads((train / "manifest.json").read_text())
+    report = json.loads((validate / REPORT_JSON).read_text())["nominal"]["policy"]
+    manifest = json.loads((train / MANIFEST).read_text())
     params = manifest["params"]
     row = {
         "seed": trial.seed,
@@ -204,12 +205,6 @@ def summary(args: argparse.Namespace) -> dict:
     }
 
 
-def _cell(cell: dict) -> str:
-    if cell["mean"] is None:
-        return "–"
-    return f"{cell['mean']:.2f}" + (f" ± {cell['ci95']:.2f}" if cell["ci95"] is not None else "")
-
-
 def markdown(result: dict) -> str:
     spec = SPECS[result["study"]]
     columns = (*spec.columns, "wall_min")
@@ -231,7 +226,7 @@ def markdown(result: dict) -> str:
         "|" + "---|" * (len(columns) + 2),
     ]
     for arm in result["arms"]:
-        cells = " | ".join(_cell(arm["table"][m]) for m in columns)
+        cells = " | ".join(format_cell(arm["table"][m]) for m in columns)
         lines.append(f"| {arm['arm']} | {len(arm['seeds'])} | {cells} |")
     lines += ["", "Per seed:", "", "| arm | seed | " + " | ".join(columns) + " |", "|" + "---|" * (len(columns) + 2)]
     for arm in result["arms"]:

@@ -16,8 +16,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from rd_pipeline.stages import REGISTRY
-from rd_pipeline.stages.train import TrainParams, clip_frames
 
 from rd_pipeline.artifacts.runner import Pipeline, resolve_source
 from rd_pipeline.artifacts.store import ArtifactStore
@@ -30,6 +28,8 @@ from rd_pipeline.rl.ppo import build_ppo
 from rd_pipeline.rl.rewards import GROUPS
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SegmentSampler
+from rd_pipeline.stages import REGISTRY
+from rd_pipeline.stages.train import TrainParams, clip_frames
 
 
 def main() -> None:

@@ -18,7 +18,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.commands import trial_artifact
+from rd_pipeline.evaluation.report import REPORT_JSON, REPORT_MD
+from rd_pipeline.stages.train import CURVE_FILE, PROFILE_FILE
 from rd_pipeline.sweeps.runner import Trial
 
 ROBOT = "g1"
@@ -42,8 +45,8 @@ def main() -> None:
     trial = Trial(ROBOT, args.motion, args.seed, "long", sets)
     train = trial_artifact(trial, args.profile, "train")
     validate = trial_artifact(trial, args.profile, "validate")
-    manifest = json.loads((train / "manifest.json").read_text())
-    report = json.loads((validate / "report.json").read_text())
+    manifest = json.loads((train / MANIFEST).read_text())
+    report = json.loads((validate / REPORT_JSON).read_text())
     policy = report["nominal"]["policy"]
     params = manifest["params"]
     result = {
@@ -67,9 +70,9 @@ def main() -> None:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
     for source, suffix in (
-        (train / "learning_curve.png", "_curve.png"),
-        (train / "sampler_profile.png", "_sampler_profile.png"),
-        (validate / "report.md", "_validation.md"),
+        (train / CURVE_FILE, "_curve.png"),
+        (train / PROFILE_FILE, "_sampler_profile.png"),
+        (validate / REPORT_MD, "_validation.md"),
     ):
         shutil.copyfile(source, args.out.parent / f"{args.out.name}{suffix}")
     print(json.dumps(result, indent=2))

@@ -25,8 +25,6 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
-from rd_pipeline.stages.import_motion import ImportParams
-from rd_pipeline.stages.retarget import RetargetParams
 
 from rd_pipeline import paths
 from rd_pipeline.evaluation.retarget_quality import retarget_quality
@@ -35,6 +33,8 @@ from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.retarget.retarget import retarget
 from rd_pipeline.robots import load_robot
+from rd_pipeline.stages.import_motion import ImportParams
+from rd_pipeline.stages.retarget import RetargetParams
 
 TAKES = [
     "dance1_subject1",

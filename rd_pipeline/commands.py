@@ -15,7 +15,7 @@ from rich.table import Table
 from rd_pipeline import paths
 from rd_pipeline.artifacts.runner import Pipeline, execute, resolve_source, stage_status
 from rd_pipeline.artifacts.stage import build_params
-from rd_pipeline.artifacts.store import ArtifactStore
+from rd_pipeline.artifacts.store import MANIFEST, ArtifactStore
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.params import layered_params
 
@@ -87,7 +87,7 @@ def print_summary(pipeline: Pipeline, outcomes: list, console: Console) -> None:
     report = None
     for outcome in outcomes:
         stage = stages[outcome.name]
-        metrics = json.loads((outcome.path / "manifest.json").read_text()).get("metrics", {})
+        metrics = json.loads((outcome.path / MANIFEST).read_text()).get("metrics", {})
         shown = "  ".join(f"{name}={_short(metrics[name])}" for name in stage.headline if name in metrics)
         state = "cached" if outcome.cached else "ran"
         console.print(f"  {outcome.name:<9} {state:<6} {outcome.seconds:7.1f} s  {shown}", highlight=False)

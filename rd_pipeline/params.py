@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +37,25 @@ def require_at_most(params: object, limit: float, *fields: str) -> None:
         value = getattr(params, field)
         if value > limit:
             raise ParamRangeError(field, f"must be at most {limit:g}, got {value}")
+
+
+def require_default_sign(name: str, value: Any, default: Any) -> None:
+    """Every number is finite and keeps its default's sign: at least 0 where the default is (rates,
+    gains, sigmas, thresholds, seeds), at most 0 where it is negative (penalty weights). Ranges
+    tighter than that are the params dataclasses' own checks."""
+    values = value if isinstance(value, tuple) else (value,)
+    defaults = default if isinstance(default, tuple) else (default,)
+    numbers = [v for v in values if isinstance(v, int | float) and not isinstance(v, bool)]
+    if not numbers or len(numbers) != len(values) or not defaults:
+        return
+    negative = min(defaults) < 0
+    for number in numbers:
+        if not math.isfinite(number):
+            raise PipelineError(f"parameter '{name}' must be finite, got {number}")
+        if negative and number > 0:
+            raise PipelineError(f"parameter '{name}' must be at most 0 like its default, got {number}")
+        if not negative and number < 0:
+            raise PipelineError(f"parameter '{name}' must be at least 0, got {number}")
 
 
 def read_params_file(path: Path, stage_names: list[str]) -> tuple[str | None, dict[str, dict[str, Any]]]:

@@ -1,8 +1,7 @@
 """The DAG stages, one thin module each. `REGISTRY` lists the stages that exist, in pipeline order."""
 
-from rd_pipeline.stages import export, import_motion, parse, prior, retarget, stats, train, validate
-
 from rd_pipeline.artifacts.stage import Stage
+from rd_pipeline.stages import export, import_motion, parse, prior, retarget, stats, train, validate
 
 REGISTRY: tuple[Stage, ...] = (
     parse.STAGE,

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 from conftest import cli
-from rd_pipeline.stages import REGISTRY
 
 from rd_pipeline.profiles import PROFILES
+from rd_pipeline.stages import REGISTRY
 
 
 @pytest.mark.offline

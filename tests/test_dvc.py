@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 from conftest import LAFAN_DIR, PROJECT
+
 from rd_pipeline.stages import stage_names
 
 

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 from conftest import LAFAN_DIR, PROJECT, RETARGETED_DIR, cli
-from rd_pipeline.stages.train import clip_frames
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
+from rd_pipeline.stages.train import clip_frames
 
 CSV_RUN = ("run", "--robot", "h1_2", "--motion", "dance2_subject4", "--until", "stats")
 

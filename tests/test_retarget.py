@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import LAFAN_DIR, cli
-from rd_pipeline.stages.retarget import RetargetParams
 from scipy.spatial.transform import Rotation
 
 from rd_pipeline.errors import PipelineError
@@ -19,6 +18,7 @@ from rd_pipeline.motion.contact import contact_runs
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.robots import load_robot
+from rd_pipeline.stages.retarget import RetargetParams
 
 SPEC_QUALITY_KEYS = {
     "fps_frames_per_s",

@@ -13,7 +13,6 @@ import dataclasses
 import numpy as np
 import pytest
 from conftest import LAFAN_DIR
-from rd_pipeline.stages.retarget import RetargetParams
 from scipy.spatial.transform import Rotation
 
 from rd_pipeline.evaluation.retarget_quality import quality_series, summarize_quality
@@ -22,6 +21,7 @@ from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, 
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.robots import load_robot
 from rd_pipeline.robots.hulls import BodyHulls
+from rd_pipeline.stages.retarget import RetargetParams
 
 EXCERPTS = {
     # name: (take, start s, end s): floor work, a fall and getting up, and the pushes and kneeling

@@ -12,12 +12,12 @@ from pathlib import Path
 
 import pytest
 from conftest import PROJECT, cli
-from rd_pipeline.stages import REGISTRY, stage_names
 
 from rd_pipeline.artifacts.keys import artifact_key
 from rd_pipeline.artifacts.runner import Pipeline, execute, resolve_source
 from rd_pipeline.artifacts.store import ArtifactStore
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.stages import REGISTRY, stage_names
 
 
 def _pipeline(robot: str, motion: str, values: dict | None = None, source: str | None = None) -> Pipeline:
@@ -100,9 +100,8 @@ def test_bad_parameter_is_named(artifacts: Path) -> None:
 
 
 def test_tuple_parameters_from_set() -> None:
-    from rd_pipeline.stages import REGISTRY
-
     from rd_pipeline.artifacts.stage import build_params
+    from rd_pipeline.stages import REGISTRY
 
     validate, train = (next(s for s in REGISTRY if s.name == n) for n in ("validate", "train"))
     assert build_params(validate, {"randomized_seeds": "[0, 1, 2]"}).randomized_seeds == (0, 1, 2)

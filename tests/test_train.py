@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 import torch
 from conftest import RETARGETED_DIR, cli
-from rd_pipeline.stages import REGISTRY
 
 from rd_pipeline.artifacts.stage import build_params
 from rd_pipeline.motion.contact import ContactThresholds
@@ -25,6 +24,7 @@ from rd_pipeline.rl.trainer import load_checkpoint, train
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
 from rd_pipeline.sampling.segments import segment_bounds
+from rd_pipeline.stages import REGISTRY
 
 
 def _setup(seed: int = 3, config: EnvConfig = EnvConfig(num_envs=4, threads=2)):

@@ -8,7 +8,6 @@ of one source and orders them by these roles, so adding a stage never touches th
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 import typing
 from collections.abc import Callable, Iterable, Iterator
@@ -22,7 +21,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 
 from rd_pipeline.artifacts.store import ArtifactRef
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.params import ParamRangeError
+from rd_pipeline.params import ParamRangeError, require_default_sign
 
 T = TypeVar("T")
 
@@ -174,27 +173,8 @@ def _override(defaults: Any, values: dict[str, Any], prefix: str) -> Any:
     except ParamRangeError as exc:
         raise PipelineError(f"parameter '{prefix}.{exc.field}' {exc.message}") from None
     for name in flat:  # after the dataclass's own, more specific checks
-        _check_sign(f"{prefix}.{name}", changes[name], getattr(defaults, name))
+        require_default_sign(f"{prefix}.{name}", changes[name], getattr(defaults, name))
     return result
-
-
-def _check_sign(name: str, value: Any, default: Any) -> None:
-    """Every number is finite and keeps its default's sign: at least 0 where the default is (rates,
-    gains, sigmas, thresholds, seeds), at most 0 where it is negative (penalty weights). Ranges
-    tighter than that are the params dataclasses' own checks."""
-    values = value if isinstance(value, tuple) else (value,)
-    defaults = default if isinstance(default, tuple) else (default,)
-    numbers = [v for v in values if isinstance(v, int | float) and not isinstance(v, bool)]
-    if not numbers or len(numbers) != len(values) or not defaults:
-        return
-    negative = min(defaults) < 0
-    for number in numbers:
-        if not math.isfinite(number):
-            raise PipelineError(f"parameter '{name}' must be finite, got {number}")
-        if negative and number > 0:
-            raise PipelineError(f"parameter '{name}' must be at most 0 like its default, got {number}")
-        if not negative and number < 0:
-            raise PipelineError(f"parameter '{name}' must be at least 0, got {number}")
 
 
 def _coerce(name: str, value: Any, default: Any) -> Any:

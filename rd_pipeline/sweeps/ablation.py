@@ -59,6 +59,13 @@ def ablation_table(study: str, arms: tuple[str, ...], results: list[TrialResult]
     return table
 
 
+def format_cell(cell: dict) -> str:
+    """`mean ± ci95` of a `t_interval` cell (`mean` alone for one seed, `–` for none)."""
+    if cell["mean"] is None:
+        return "–"
+    return f"{cell['mean']:.2f}" + (f" ± {cell['ci95']:.2f}" if cell["ci95"] is not None else "")
+
+
 def write_ablation(study: str, table: dict, results: list[TrialResult], out_dir: Path) -> Path:
     """`ablation.json` and `ablation.md` (arms x metrics, mean ± 95% CI over seeds)."""
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -79,14 +86,7 @@ def write_ablation(study: str, table: dict, results: list[TrialResult], out_dir:
         "|---|" + "---|" * (len(metrics) + 1),
     ]
     for arm, row in table.items():
-        cells = []
-        for m in metrics:
-            cell = row[m]
-            cells.append(
-                "–"
-                if cell["mean"] is None
-                else f"{cell['mean']:.2f}" + (f" ± {cell['ci95']:.2f}" if cell["ci95"] is not None else "")
-            )
+        cells = [format_cell(row[m]) for m in metrics]
         lines.append(f"| {arm} | " + " | ".join(cells) + f" | {max(row[m]['n'] for m in metrics)} |")
     if failed:
         lines += ["", "Failed trials: " + ", ".join(failed)]
