@@ -206,7 +206,7 @@ def view(cmd: View, console: Console) -> int:
 
 def export_motion(cmd: ExportMotion, console: Console) -> int:
     from rd_pipeline.export.motion_csv import write_dataset_csv
-    from rd_pipeline.export.motion_mjlab import write_mjlab_npz
+    from rd_pipeline.export.motion_mjlab import missing_joints, write_mjlab_npz
     from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
     from rd_pipeline.robots import load_robot
 
@@ -225,6 +225,9 @@ def export_motion(cmd: ExportMotion, console: Console) -> int:
         fps = cmd.fps or reference.fps
         frames = write_mjlab_npz(reference, robot, cmd.out, fps)
     console.print(f"wrote {cmd.out}: {frames} frames at {fps:g} fps from {made_by} {folder.name}", highlight=False)
+    missing = missing_joints(robot) if cmd.format == "mjlab" else []
+    if missing:
+        console.print(f"mjlab's {cmd.robot} model has joints this one lacks, written as 0: {', '.join(missing)}")
     return 0
 
 

@@ -10,6 +10,7 @@ import pytest
 from conftest import RETARGETED_DIR, cli
 from scipy.spatial.transform import Rotation
 
+from rd_pipeline.export.motion_mjlab import hinge_names, task_model
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
@@ -59,22 +60,32 @@ def test_a_bad_rate_is_one_line(artifacts: Path, tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("robot_name", "fps"), [("g1", None), ("h1_2", 30.0)])
-def test_mjlab_npz_follows_the_model_order_and_its_own_kinematics(
+def test_mjlab_npz_follows_the_task_model_order_and_its_kinematics(
     robot_name: str, fps: float | None, artifacts: Path, tmp_path: Path
 ) -> None:
-    """The contract of mjlab's `MotionLoader`: joints in the model's hinge order, every body but the
-    world in the model's order, wxyz quaternions; checked by forward kinematics on the model."""
+    """The contract of mjlab's `MotionLoader`: joints in the task model's hinge order, every body but
+    the world in its order, wxyz quaternions; checked by forward kinematics on that model. For G1 the
+    task model is the 29-DoF G1 with mjlab's torso frame (bench/mjlab_interop.py checks it against
+    mjlab itself); H1-2 has no mjlab task and keeps its own model."""
     motion = {"g1": "dance1_subject2", "h1_2": "dance2_subject4"}[robot_name]
     out = tmp_path / f"{robot_name}.npz"
     args = ["export-motion", "--robot", robot_name, "--motion", motion, "--source", "csv", "--format", "mjlab"]
     result = cli(*args, "--out", str(out), *(["--fps", str(fps)] if fps else []))
     assert result.returncode == 0, result.stderr
     robot = load_robot(robot_name)
-    model = robot.model
+    model, offsets = task_model(robot)
     data = np.load(out)
-    hinges = [model.joint(i).name for i in range(model.njnt) if model.jnt_type[i] == mujoco.mjtJoint.mjJNT_HINGE]
+    hinges = hinge_names(model)
     assert list(data["joint_names"]) == hinges
     assert list(data["body_names"]) == [model.body(i).name for i in range(1, model.nbody)]
+    lacking = [i for i, name in enumerate(hinges) if name not in robot.config.joint_names]
+    if robot_name == "g1":
+        assert (len(hinges), model.nbody - 1, len(lacking)) == (29, 30, 6)
+        assert "written as 0: waist_roll_joint, waist_pitch_joint, left_wrist_pitch_joint" in result.stderr
+        assert list(offsets) == ["torso_link"]
+    else:
+        assert (model.nq, lacking, offsets) == (robot.model.nq, [], {})
+    assert not data["joint_pos"][:, lacking].any()
     duration = {"g1": 131.5, "h1_2": 225.7}[robot_name]
     frames = round(duration * (fps or 50.0))
     assert float(data["fps"][0]) == (fps or 50.0)
@@ -89,8 +100,15 @@ def test_mjlab_npz_follows_the_model_order_and_its_own_kinematics(
         for name, angle in zip(hinges, data["joint_pos"][t]):
             state.qpos[model.jnt_qposadr[model.joint(name).id]] = angle
         mujoco.mj_kinematics(model, state)
-        np.testing.assert_allclose(state.xpos[1:], data["body_pos_w"][t], atol=1e-5)
+        expected = state.xpos[1:].copy()
+        for body, offset in offsets.items():
+            index = model.body(body).id
+            expected[index - 1] += state.xmat[index].reshape(3, 3) @ offset
+        np.testing.assert_allclose(expected, data["body_pos_w"][t], atol=1e-5)
         np.testing.assert_allclose(np.abs(np.sum(state.xquat[1:] * data["body_quat_w"][t], axis=-1)), 1.0, atol=1e-5)
+    if robot_name == "g1":
+        torso = model.body("torso_link").id
+        assert np.linalg.norm(expected[torso - 1] - state.xpos[torso]) == pytest.approx(0.010)
     # Velocities are those of the positions: finite differences over one frame.
     dt = 1.0 / (fps or 50.0)
     moved = (data["body_pos_w"][2:] - data["body_pos_w"][:-2]) / (2 * dt)
@@ -129,4 +147,4 @@ def test_every_robot_exports_both_formats(
         assert f"from {made_by} " in result.stderr
     columns = np.loadtxt(tmp_path / f"{robot_name}.csv", delimiter=",").shape[1]
     assert columns == 7 + len(robot.config.csv_joints)
-    assert np.load(tmp_path / f"{robot_name}.npz")["joint_pos"].shape[1] == len(robot.config.joint_names)
+    assert np.load(tmp_path / f"{robot_name}.npz")["joint_pos"].shape[1] == len(robot.config.csv_joints)

@@ -1,49 +1,102 @@
 """A reference motion as the npz that mjlab's and BeyondMimic's tracking tasks load.
 
-Their `MotionLoader` reads `fps`, `joint_pos`, `joint_vel` (joints in the order of the robot model's
+Their `MotionLoader` reads `fps`, `joint_pos`, `joint_vel` (joints in the order of the task robot's
 hinge joints) and `body_pos_w`, `body_quat_w` (wxyz), `body_lin_vel_w`, `body_ang_vel_w` for every
-body of the model but the world, in the model's order; the task then picks its tracked bodies by
+body of that robot but the world, in its model order; the task then picks its tracked bodies by
 index into that list. `joint_names` and `body_names` say which column is which.
+
+The task robot is not always the pipeline's: mjlab's G1 is the 29-DoF model, the pipeline's the
+23-DoF one (the paper's). `robots/interop/mjlab.toml` names the task model per robot; the motion is
+laid out on it by joint name, with the joints the pipeline's model lacks at 0.
 """
 
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 
+import mujoco
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from rd_pipeline.export.motion_csv import resample_root_and_joints
-from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
+from rd_pipeline.motion.reference import ReferenceMotion, angular_velocity, finite_difference
+from rd_pipeline.paths import ROBOT_CONFIG_DIR
 from rd_pipeline.robots import Robot
+from rd_pipeline.robots.assets import asset_path
+
+LAYOUTS_FILE = ROBOT_CONFIG_DIR / "interop" / "mjlab.toml"
 
 
-def at_rate(reference: ReferenceMotion, robot: Robot, fps: float) -> ReferenceMotion:
-    """`reference` at `fps`: the same motion, its body poses and velocities recomputed by FK."""
+def task_model(robot: Robot) -> tuple[mujoco.MjModel, dict[str, np.ndarray]]:
+    """The model mjlab's tracking task for `robot` is built on (`LAYOUTS_FILE`), else the robot's own,
+    and where that task puts body frames that the model has elsewhere on the same link."""
+    layouts = tomllib.loads(LAYOUTS_FILE.read_text())
+    entry = layouts.get(robot.config.name)
+    if entry is None:
+        return robot.model, {}
+    model = mujoco.MjModel.from_xml_path(str(asset_path(entry["mjcf"])))
+    offsets = {body: np.asarray(offset, dtype=float) for body, offset in entry.get("frame_offsets", {}).items()}
+    return model, offsets
+
+
+def hinge_names(model: mujoco.MjModel) -> list[str]:
+    hinges = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE)
+    return [model.joint(i).name for i in hinges]
+
+
+def missing_joints(robot: Robot) -> list[str]:
+    """Joints of the task model that the pipeline's model lacks (written as 0)."""
+    model, _ = task_model(robot)
+    return [name for name in hinge_names(model) if name not in robot.config.joint_names]
+
+
+def _root_and_joints(reference: ReferenceMotion, fps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(root_pos, root_quat wxyz, joint_pos) at `fps`; the reference's own frames at its rate."""
     if fps == reference.fps:
-        return reference
+        return reference.root_pos, reference.root_quat, reference.joint_pos
     root_pos, root_quat_xyzw, joint_pos = resample_root_and_joints(reference, fps)
-    root_quat = root_quat_xyzw[:, [3, 0, 1, 2]]
-    no_contact = np.zeros((len(joint_pos), 2), dtype=bool)
-    return reference_from_joint_trajectory(robot, fps, root_pos, root_quat, joint_pos, no_contact)
+    return root_pos, root_quat_xyzw[:, [3, 0, 1, 2]], joint_pos
 
 
 def write_mjlab_npz(reference: ReferenceMotion, robot: Robot, path: Path, fps: float) -> int:
-    """Write `reference` at `fps` in mjlab's motion layout; returns the number of frames."""
-    motion = at_rate(reference, robot, fps)
-    model_order = np.argsort(robot.qpos_indices)
+    """Write `reference` at `fps` in the layout of mjlab's task model; returns the number of frames."""
+    model, frame_offsets = task_model(robot)
+    root_pos, root_quat, joint_pos = _root_and_joints(reference, fps)
+    hinges = hinge_names(model)
+    layout = np.zeros((len(joint_pos), len(hinges)))
+    for column, name in enumerate(hinges):
+        if name in reference.joint_names:
+            layout[:, column] = joint_pos[:, reference.joint_names.index(name)]
+    qpos_address = model.jnt_qposadr[[model.joint(name).id for name in hinges]]
+    data = mujoco.MjData(model)
+    body_pos = np.empty((len(layout), model.nbody - 1, 3))
+    body_quat = np.empty((len(layout), model.nbody - 1, 4))
+    for t in range(len(layout)):
+        data.qpos[:3] = root_pos[t]
+        data.qpos[3:7] = root_quat[t]
+        data.qpos[qpos_address] = layout[t]
+        mujoco.mj_kinematics(model, data)
+        body_pos[t] = data.xpos[1:]
+        body_quat[t] = data.xquat[1:]
+    for body, offset in frame_offsets.items():
+        index = model.body(body).id - 1
+        turn = Rotation.from_quat(body_quat[:, index], scalar_first=True)
+        body_pos[:, index] += turn.apply(offset)
+    dt = 1.0 / fps
     arrays = {
         "fps": np.array([fps]),
-        "joint_pos": motion.joint_pos[:, model_order].astype(np.float32),
-        "joint_vel": motion.joint_vel[:, model_order].astype(np.float32),
-        "body_pos_w": motion.body_pos_w.astype(np.float32),
-        "body_quat_w": motion.body_quat_w.astype(np.float32),
-        "body_lin_vel_w": motion.body_lin_vel_w.astype(np.float32),
-        "body_ang_vel_w": motion.body_ang_vel_w.astype(np.float32),
-        "joint_names": np.array([motion.joint_names[i] for i in model_order]),
-        "body_names": np.array(motion.body_names),
+        "joint_pos": layout.astype(np.float32),
+        "joint_vel": finite_difference(layout, dt).astype(np.float32),
+        "body_pos_w": body_pos.astype(np.float32),
+        "body_quat_w": body_quat.astype(np.float32),
+        "body_lin_vel_w": finite_difference(body_pos, dt).astype(np.float32),
+        "body_ang_vel_w": angular_velocity(body_quat, dt).astype(np.float32),
+        "joint_names": np.array(hinges),
+        "body_names": np.array([model.body(i).name for i in range(1, model.nbody)]),
     }
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(f".{path.name}.partial.npz")
     np.savez(partial, **arrays)
     partial.replace(path)
-    return motion.n_frames
+    return len(layout)

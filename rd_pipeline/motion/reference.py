@@ -106,18 +106,18 @@ def reference_from_joint_trajectory(
         joint_names=robot.config.joint_names,
         body_names=tuple(robot.body_names),
         joint_pos=joint_pos,
-        joint_vel=_derivative(joint_pos, dt),
+        joint_vel=finite_difference(joint_pos, dt),
         root_pos=root_pos,
         root_quat=root_quat,
         body_pos_w=body_pos,
         body_quat_w=body_quat,
-        body_lin_vel_w=_derivative(body_pos, dt),
+        body_lin_vel_w=finite_difference(body_pos, dt),
         body_ang_vel_w=angular_velocity(body_quat, dt),
         foot_contact=foot_contact,
     )
 
 
-def _derivative(values: np.ndarray, dt: float) -> np.ndarray:
+def finite_difference(values: np.ndarray, dt: float) -> np.ndarray:
     """Central differences inside, one-sided at the ends; consistent with the sampled positions."""
     if values.shape[0] < 2:
         return np.zeros_like(values)
