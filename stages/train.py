@@ -94,7 +94,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     reference = reference.frames(start, end)
     starts, lengths, weights = starts[keep] - start, lengths[keep], weights[keep]
     balanced = torch.as_tensor(weights if weights.sum() > 0 else np.ones(len(weights)))
-    sampler = SegmentSampler(p.sampler, balanced, seed=p.seed, device=p.env.device)
+    sampler = SegmentSampler(p.sampler, balanced, seed=p.seed)
     env = TrackingEnv(robot, reference, sampler, starts, lengths, p.env, seed=p.seed)
     ppo = build_ppo(env.get_observations(), env.num_envs, env.num_actions, len(GROUPS), p.ppo, p.env.device)
     observation_size = int(env.get_observations()["policy"].shape[1])

@@ -101,7 +101,7 @@ def test_a_reward_weight_and_a_termination_threshold_set_on_the_command_line_cha
         lengths = []
         for _ in range(30):
             _, _, _, extras = env.step(torch.zeros(env.num_envs, env.num_actions))
-            terms.append(extras["log"]["reward/body_pos"])
+            terms.append(float(extras["log"]["reward/body_pos"]))
             lengths += extras["episode_length"].tolist()
         rollouts[label] = (np.array(terms), lengths)
         env.close()

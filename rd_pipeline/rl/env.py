@@ -83,6 +83,7 @@ class TrackingEnv:
         self.ref = events.ReferenceFrames(
             root_pos=tensor(reference.root_pos),
             root_quat=tensor(reference.root_quat),
+            root_quat_host=np.asarray(reference.root_quat, dtype=np.float32),
             root_lin_vel=tensor(reference.body_lin_vel_w[:, root]),
             root_ang_vel=tensor(reference.body_ang_vel_w[:, root]),
             joint_pos=tensor(reference.joint_pos),
@@ -112,20 +113,22 @@ class TrackingEnv:
             effort_limit=tensor(rc.effort_limit),
         )
         self.rewards = RewardManager(config.rewards, self.term_context)
-        self.sigma = AdaptiveSigma(config.curricula.adaptive_sigma_alpha, self.rewards.tracking_sigmas())
+        self.sigma = AdaptiveSigma(config.curricula.adaptive_sigma_alpha, self.rewards.tracking_sigmas(), device)
 
         n = self.num_envs
         self.frame = torch.zeros(n, dtype=torch.long, device=device)
-        self.start_segment = torch.zeros(n, dtype=torch.long, device=device)
-        self.episode_length_buf = torch.zeros(n, dtype=torch.long, device=device)
+        # Episode bookkeeping lives on the host beside the random generator and the sampler: resets,
+        # pushes and curricula then read one transfer per step, the done flags.
+        self.start_segment = torch.zeros(n, dtype=torch.long)
+        self.episode_length_buf = torch.zeros(n, dtype=torch.long)
         self.action_history = torch.zeros(n, 3, self.num_actions, dtype=DTYPE, device=device)
         queue = config.randomization.max_delay_steps + 1
         self.target_queue = torch.zeros(n, queue, len(rc.joint_names), dtype=DTYPE, device=device)
         self.feet_air_time = torch.zeros(n, 2, dtype=DTYPE, device=device)
-        self.next_push = tensor(events.push_intervals(config.randomization, n, self.step_dt, self.rng), torch.long)
+        self.next_push = torch.as_tensor(events.push_intervals(config.randomization, n, self.step_dt, self.rng))
         self.curriculum = curricula.initial_state(config.curricula, config.terminations)
         self.obs_frames: torch.Tensor | None = None
-        self.reset(torch.arange(n, device=device))
+        self.reset(torch.arange(n))
         self.get_observations()  # fills the observation history
 
     # -- reset -------------------------------------------------------------------------------
@@ -134,8 +137,9 @@ class TrackingEnv:
         from a segment the sampler picks."""
         if len(env_ids) == 0:
             return
+        env_ids = env_ids.cpu()
         if frames is None:
-            segments = self.sampler.sample(len(env_ids)).cpu()
+            segments = self.sampler.sample(len(env_ids))
             offsets = torch.as_tensor(self.rng.random(len(env_ids))) * self.segment_lengths[segments]
             frames = self.segment_starts[segments] + offsets.long()
             frames = frames.clamp(max=self.max_episode_length - 2)
@@ -143,15 +147,15 @@ class TrackingEnv:
             frames = frames.cpu()
             segments = torch.searchsorted(self.segment_starts, frames, right=True) - 1
             segments = segments.clamp(min=0)
-        frames = frames.to(self.device)
         model = self.backend.models[0]
         qpos, qvel = events.rsi_state(
             self.config, self.ref, frames, model.nq, model.nv, self.qpos_idx, self.dof_idx, self.joint_range, self.rng
         )
-        self.backend.set_state(env_ids, qpos, qvel)
-        self.frame[env_ids] = frames
-        self.start_segment[env_ids] = segments.to(self.device)
+        self.start_segment[env_ids] = segments
         self.episode_length_buf[env_ids] = 0
+        env_ids = env_ids.to(self.device)
+        self.backend.set_state(env_ids, qpos, qvel)
+        self.frame[env_ids] = frames.to(self.device)
         self.action_history[env_ids] = 0.0
         self.feet_air_time[env_ids] = 0.0
         self.target_queue[env_ids] = qpos[:, self.qpos_idx].to(DTYPE)[:, None]
@@ -218,13 +222,16 @@ class TrackingEnv:
         rewards = rewards * self.step_dt
         time_out = self.frame >= self.max_episode_length - 1
         dones = terminated | time_out
-        done_ids = torch.nonzero(dones).flatten()
-        self.sampler.record(self.start_segment[done_ids], terminated[done_ids])
+        # The one read from the device per step (mjlab and Isaac Lab read their reset ids too).
+        flags = torch.stack([terminated, time_out]).cpu()
+        failed = flags[0]
+        done_ids = torch.nonzero(flags.any(0)).flatten()
+        self.sampler.record(self.start_segment[done_ids], failed[done_ids])
         self.sampler.advance(1)
         lengths = self.episode_length_buf[done_ids]
         extras = {
             "time_outs": time_out & ~terminated,
-            "log": {f"reward/{k}": v.mean().item() for k, v in terms.items()},
+            "log": {f"reward/{k}": v.mean() for k, v in terms.items()},
             "episode_length": lengths.float(),
         }
         mean_length = float(lengths.float().mean()) if len(lengths) else 0.0
@@ -251,9 +258,9 @@ class TrackingEnv:
         due = torch.nonzero(self.episode_length_buf >= self.next_push).flatten()
         if len(due):
             velocity = events.push_velocities(r, len(due), self.rng)
-            self.backend.push(due, torch.as_tensor(velocity, device=self.device))
+            self.backend.push(due.to(self.device), torch.as_tensor(velocity, device=self.device))
             intervals = events.push_intervals(r, len(due), self.step_dt, self.rng)
-            self.next_push[due] = self.episode_length_buf[due] + torch.as_tensor(intervals, device=self.device)
+            self.next_push[due] = self.episode_length_buf[due] + torch.as_tensor(intervals)
         forces = events.random_joint_forces(r, self.rfi_factor, np.asarray(self.robot.config.effort_limit), self.rng)
         joint_force = torch.zeros(self.num_envs, self.backend.models[0].nv, dtype=torch.float64, device=self.device)
         joint_force[:, self.dof_idx] = torch.as_tensor(forces, device=self.device)
@@ -324,22 +331,23 @@ class TrackingEnv:
             "penalty_scale": self.curriculum.penalty_scale,
             "rng": self.rng.bit_generator.state,
             "feet_air_time": self.feet_air_time.clone(),
-            "sigma_variance": dict(self.sigma.variance),
+            "sigma_variance": self.sigma.state_dict(),
         }
 
     def load_state_dict(self, state: dict) -> None:
         device = lambda name: state[name].to(self.device).clone()
+        host = lambda name: state[name].cpu().clone()
         self.backend.set_states(state["physics"])
         self.frame = device("frame")
-        self.start_segment = device("start_segment")
-        self.episode_length_buf = device("episode_length")
+        self.start_segment = host("start_segment")
+        self.episode_length_buf = host("episode_length")
         self.action_history = device("action_history")
         self.target_queue = device("target_queue")
-        self.next_push = device("next_push")
+        self.next_push = host("next_push")
         self.obs_frames = device("obs_frames")
         self.feet_air_time = device("feet_air_time")
         self.curriculum = curricula.CurriculumState(state["motion_far"], state["penalty_scale"])
-        self.sigma.variance = dict(state["sigma_variance"])
+        self.sigma.load_state_dict(state["sigma_variance"])
         self.rng.bit_generator.state = state["rng"]
 
     def close(self) -> None:

@@ -72,6 +72,9 @@ class ReferenceFrames:
 
     root_pos: torch.Tensor
     root_quat: torch.Tensor
+    root_quat_host: np.ndarray
+    """`root_quat` on the host, where the rotation noise is composed (scipy), so a reset reads
+    nothing back from the device."""
     root_lin_vel: torch.Tensor
     root_ang_vel: torch.Tensor
     joint_pos: torch.Tensor
@@ -89,10 +92,12 @@ def rsi_state(
     joint_range: torch.Tensor,
     rng: np.random.Generator,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """(k, nq), (k, nv) float64 states at reference `frames` with the appendix noise (reference
-    state initialization), joint positions clipped to their range."""
+    """(k, nq), (k, nv) float64 states on the training device at reference `frames` (host indices)
+    with the appendix noise (reference state initialization), joint positions clipped to their range."""
     k = len(frames)
-    device = frames.device
+    device = ref.root_pos.device
+    host_frames = frames.numpy()
+    frames = frames.to(device)
     host = lambda a: torch.from_numpy(np.asarray(a, dtype=np.float64)).to(device)
     qpos = torch.zeros(k, nq, dtype=torch.float64, device=device)
     qvel = torch.zeros(k, nv, dtype=torch.float64, device=device)
@@ -101,7 +106,7 @@ def rsi_state(
     # root velocity, joint velocities.
     root_noise = rng.normal(0, c.rsi_root_pos_m, (k, 3)) * [1, 1, 0]
     qpos[:, :3] = ref.root_pos[frames].double() + host(root_noise)
-    quat = _perturb_quat(ref.root_quat[frames].cpu().numpy(), np.radians(c.rsi_root_rot_deg), rng)
+    quat = _perturb_quat(ref.root_quat_host[host_frames], np.radians(c.rsi_root_rot_deg), rng)
     qpos[:, 3:7] = host(quat)
     joint_noise = rng.uniform(-c.rsi_joint_pos, c.rsi_joint_pos, (k, joints))
     qpos[:, qpos_idx] = ref.joint_pos[frames].double() + host(joint_noise)

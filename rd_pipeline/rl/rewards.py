@@ -141,7 +141,7 @@ class RewardManager:
         self,
         state: TrackingState,
         penalty_scale: float,
-        sigma: dict[str, float] | None = None,
+        sigma: dict[str, torch.Tensor] | None = None,
     ) -> tuple[torch.Tensor, dict[str, torch.Tensor], dict[str, torch.Tensor]]:
         """(N, G) reward per group (in `GROUPS` order), (N,) value and (N,) error per term.
 
@@ -176,15 +176,23 @@ class AdaptiveSigma:
     tracking improves instead of saturating at a reward that no longer separates good from better.
     """
 
-    def __init__(self, alpha: float, table_sigmas: dict[str, float]) -> None:
+    def __init__(self, alpha: float, table_sigmas: dict[str, float], device: torch.device) -> None:
         self.alpha = alpha
         self.origin = {name: sigma**2 for name, sigma in table_sigmas.items()}
-        self.variance = dict(self.origin)
+        # 0-d float64 tensors on the training device: the EMA never waits for the device.
+        self.variance = {name: torch.tensor(v, dtype=torch.float64, device=device) for name, v in self.origin.items()}
 
     def update(self, errors: dict[str, torch.Tensor]) -> None:
         for name, origin in self.origin.items():
-            ema = (1 - self.alpha) * self.variance[name] + self.alpha * float(errors[name].mean())
-            self.variance[name] = min(origin, ema)
+            ema = (1 - self.alpha) * self.variance[name] + self.alpha * errors[name].mean().double()
+            self.variance[name] = ema.clamp(max=origin)
 
-    def sigma(self) -> dict[str, float]:
+    def sigma(self) -> dict[str, torch.Tensor]:
         return {name: variance**0.5 for name, variance in self.variance.items()}
+
+    def state_dict(self) -> dict[str, float]:
+        return {name: float(variance) for name, variance in self.variance.items()}
+
+    def load_state_dict(self, state: dict[str, float]) -> None:
+        for name, value in state.items():
+            self.variance[name] = torch.tensor(value, dtype=torch.float64, device=self.variance[name].device)

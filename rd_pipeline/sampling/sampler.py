@@ -70,20 +70,23 @@ def water_fill(weights: torch.Tensor, cap: float) -> torch.Tensor:
 
 
 class SegmentSampler:
-    """Chooses start segments for resetting environments and learns which segments fail."""
+    """Chooses start segments for resetting environments and learns which segments fail.
 
-    def __init__(self, config: SamplerConfig, balanced: torch.Tensor, seed: int, device: str = "cpu") -> None:
+    It lives on the host whatever the training device: a few hundred segments, drawn from and
+    updated between physics steps, where the environment keeps its episode bookkeeping."""
+
+    def __init__(self, config: SamplerConfig, balanced: torch.Tensor, seed: int) -> None:
         if config.mode not in MODES:
             raise ValueError(f"sampler mode must be one of {', '.join(MODES)}, got '{config.mode}'")
         self.config = config
         self.n_segments = balanced.numel()
-        self.uniform = torch.full((self.n_segments,), 1.0 / self.n_segments, dtype=torch.float64, device=device)
-        self.balanced = (balanced / balanced.sum()).to(device=device, dtype=torch.float64)
-        self.failure_rate = torch.zeros(self.n_segments, dtype=torch.float64, device=device)
-        self.failures = torch.zeros(self.n_segments, dtype=torch.float64, device=device)
-        self.attempts = torch.zeros(self.n_segments, dtype=torch.float64, device=device)
+        self.uniform = torch.full((self.n_segments,), 1.0 / self.n_segments, dtype=torch.float64)
+        self.balanced = (balanced / balanced.sum()).to(dtype=torch.float64)
+        self.failure_rate = torch.zeros(self.n_segments, dtype=torch.float64)
+        self.failures = torch.zeros(self.n_segments, dtype=torch.float64)
+        self.attempts = torch.zeros(self.n_segments, dtype=torch.float64)
         self.step = 0
-        self.generator = torch.Generator(device=device).manual_seed(seed)
+        self.generator = torch.Generator().manual_seed(seed)
 
     def mixture_weights(self, step: int | None = None) -> tuple[float, float, float]:
         """(lambda_u, lambda_d, lambda_f) at `step` for the configured mode."""
