@@ -37,7 +37,8 @@ class Run:
     force: bool = False
     """Recompute the selected stages even when cached."""
     resume: bool = False
-    """Continue an interrupted long stage (training) from its last checkpoint."""
+    """Continue an interrupted long stage (training) from its last checkpoint, or grow a finished
+    training that differs only in fewer iterations."""
     seed: int = 0
     """Seed for stages that draw random numbers."""
     source: str | None = None
@@ -67,7 +68,8 @@ class StageCommand:
     force: bool = False
     """Recompute even when cached."""
     resume: bool = False
-    """Continue an interrupted long stage (training) from its last checkpoint."""
+    """Continue an interrupted long stage (training) from its last checkpoint, or grow a finished
+    training that differs only in fewer iterations."""
     seed: int = 0
     """Seed for stages that draw random numbers."""
     set: tuple[str, ...] = ()

@@ -10,6 +10,7 @@ from typing import Any
 
 from rd_pipeline.artifacts.files import open_npz
 from rd_pipeline.artifacts.stage import Stage, StageContext
+from rd_pipeline.artifacts.store import ArtifactRef
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion import MIN_MOTION_S
 from rd_pipeline.params import require_positive
@@ -103,12 +104,21 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     work = ctx.work_dir or ctx.out_dir
     checkpoints = sorted((work / CHECKPOINT_DIR).glob("model_*.pt"), key=lambda f: int(f.stem.split("_")[1]))
     start_iteration = 0
+    shorter = _longest_shorter_run(ctx.shorter, p.iterations) if ctx.resume and not checkpoints else None
     if ctx.resume and checkpoints:
         start_iteration = load_checkpoint(checkpoints[-1], ppo, env)
         ctx.console.print(f"  resuming from {checkpoints[-1].name}")
     elif work.exists() and work != ctx.out_dir:
         shutil.rmtree(work)
     work.mkdir(parents=True, exist_ok=True)
+    if shorter is not None:
+        # Nothing in training depends on the total number of iterations, so a longer run is the
+        # shorter one continued: its log and checkpoints are copied and its last checkpoint resumed.
+        shutil.copytree(shorter.path / CHECKPOINT_DIR, work / CHECKPOINT_DIR)
+        shutil.copy2(shorter.path / LOG_FILE, work / LOG_FILE)
+        done = shorter.manifest["params"]["iterations"]
+        start_iteration = load_checkpoint(work / CHECKPOINT_DIR / f"model_{done}.pt", ppo, env)
+        ctx.console.print(f"  continuing the {done}-iteration run {shorter.key}")
     with ctx.progress(p.iterations - start_iteration, f"PPO {ctx.robot}") as advance:
         train(
             env,
@@ -148,6 +158,12 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     }
 
 
+def _longest_shorter_run(runs: tuple[ArtifactRef, ...], iterations: int) -> ArtifactRef | None:
+    """The finished run with the most iterations below `iterations`, if any."""
+    below = [run for run in runs if run.manifest["params"]["iterations"] < iterations]
+    return max(below, key=lambda run: run.manifest["params"]["iterations"], default=None)
+
+
 STAGE = Stage(
     name="train",
     version=3,
@@ -158,4 +174,5 @@ STAGE = Stage(
     inputs=lambda robot, motion: model_files(robot),
     requires=("reference", "sampling_prior"),
     headline=("iterations", "final_episode_length_s", "samples_per_s_median"),
+    extends=("iterations",),
 )

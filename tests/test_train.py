@@ -185,3 +185,35 @@ def test_cli_resume_continues_an_interrupted_training(artifacts: Path) -> None:
     log = [json.loads(line)["iteration"] for line in (done / "training_log.jsonl").read_text().splitlines()]
     assert log[-1] == 30 and log[:3] == [1, 2, 3]
     assert not list(folder.glob(".work-*"))  # moved into the artifact
+
+
+@pytest.mark.slow
+def test_a_longer_run_with_resume_continues_the_shorter_one_bit_for_bit(artifacts: Path, tmp_path: Path) -> None:
+    """`--resume` with more iterations than a finished run continues that run; the result equals the
+    longer run made from scratch, and the shorter artifact stays as it was."""
+    import shutil
+
+    import torch
+
+    args = ["run", "--robot", "g1", "--motion", "dance1_subject2", "--until", "train", "--profile", "smoke"]
+    assert cli(*args, "--set", "train.iterations=2", "train.checkpoint_every=1").returncode == 0
+    folder = artifacts / "train" / "g1" / "dance1_subject2"
+    (short,) = [p for p in folder.iterdir() if not p.name.startswith(".")]
+    longer = cli(*args, "--resume", "--set", "train.iterations=4", "train.checkpoint_every=1")
+    assert longer.returncode == 0, longer.stderr
+    assert f"continuing the 2-iteration run {short.name}" in longer.stderr
+    (grown,) = [p for p in folder.iterdir() if not p.name.startswith(".") and p != short]
+    shutil.copytree(grown, tmp_path / "grown")
+    scratch = cli(*args, "--force", "--set", "train.iterations=4", "train.checkpoint_every=1")
+    assert scratch.returncode == 0 and "continuing" not in scratch.stderr
+    assert sorted(p.name for p in (short / "checkpoints").iterdir()) == ["model_1.pt", "model_2.pt"]
+    log = lambda run: [json.loads(line) for line in (run / "training_log.jsonl").read_text().splitlines()]
+    timing = ("seconds", "samples_per_s")
+    strip = lambda rows: [{k: v for k, v in row.items() if k not in timing} for row in rows]
+    assert [row["iteration"] for row in log(tmp_path / "grown")] == [1, 2, 3, 4]
+    assert strip(log(tmp_path / "grown")) == strip(log(grown))
+    a = torch.load(tmp_path / "grown" / "checkpoints" / "model_4.pt", weights_only=False)
+    b = torch.load(grown / "checkpoints" / "model_4.pt", weights_only=False)
+    for name, value in a["algorithm"]["actor_state_dict"].items():
+        assert torch.equal(value, b["algorithm"]["actor_state_dict"][name]), name
+    assert a["env"]["rng"] == b["env"]["rng"]

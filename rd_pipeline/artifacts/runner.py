@@ -14,7 +14,7 @@ from typing import Any
 from rich.console import Console
 
 from rd_pipeline import __version__, paths
-from rd_pipeline.artifacts.keys import artifact_key, file_sha256
+from rd_pipeline.artifacts.keys import artifact_key, canonical_json, file_sha256
 from rd_pipeline.artifacts.stage import Stage, StageContext, build_params
 from rd_pipeline.artifacts.store import ArtifactRef, ArtifactStore, file_records, write_manifest
 from rd_pipeline.errors import PipelineError
@@ -270,6 +270,7 @@ def _run_stage(
             console=console,
             work_dir=store.folder(stage.name, robot, pipeline.motion) / f".work-{entry.key}",
             resume=resume,
+            shorter=_shorter_runs(store, entry, robot, pipeline.motion) if resume else (),
         )
         metrics = stage.run(context)
         write_manifest(
@@ -290,6 +291,28 @@ def _run_stage(
             },
         )
     return ArtifactRef(stage.name, entry.key, store.folder(stage.name, robot, pipeline.motion) / entry.key)
+
+
+def _shorter_runs(store: ArtifactStore, entry: PlannedStage, robot: str | None, motion: str) -> tuple[ArtifactRef, ...]:
+    """Finished artifacts that `entry` would have made with other values of the stage's `extends`
+    params: their key, recomputed from their own params with this entry's version, inputs and
+    upstream, is their folder name."""
+    stage = entry.stage
+    if not stage.extends:
+        return ()
+    fixed = lambda params: canonical_json({k: v for k, v in params.items() if k not in stage.extends})
+    wanted = fixed(dataclasses.asdict(entry.params))
+    found = []
+    for key in store.keys(stage.name, robot, motion):
+        ref = store.find(stage.name, robot, motion, key)
+        if ref is None or key == entry.key:
+            continue
+        params = ref.manifest.get("params", {})
+        if fixed(params) != wanted:
+            continue
+        if artifact_key(stage.name, stage.version, params, entry.upstream, entry.input_hashes) == key:
+            found.append(ref)
+    return tuple(found)
 
 
 def _label(robot: str | None, motion: str) -> str:

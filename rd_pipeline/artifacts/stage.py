@@ -48,6 +48,9 @@ class StageContext:
     """A folder that survives an interrupted run of this key (long stages keep checkpoints there)."""
     resume: bool = False
     """Continue from what `work_dir` holds instead of starting over."""
+    shorter: tuple[ArtifactRef, ...] = ()
+    """With `resume`: finished artifacts of this stage, version, inputs and upstream whose params
+    differ from `params` only in the stage's `extends` fields; the stage decides which it can grow."""
 
     def track(self, items: Iterable[T], total: int, description: str) -> Iterator[T]:
         """Iterate with a progress bar (ETA included) for long loops."""
@@ -125,6 +128,9 @@ class Stage:
     """Manifest metrics shown in the summary at the end of a run."""
     report: str | None = None
     """A file of the artifact people read first (shown at the end of a run)."""
+    extends: tuple[str, ...] = ()
+    """Params a run may grow (training iterations): with `--resume` it may continue from a finished
+    artifact of this stage that differs from it only in these (`StageContext.shorter`)."""
 
 
 def build_params(stage: Stage, values: dict[str, Any]) -> Any:
