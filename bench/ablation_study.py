@@ -154,6 +154,13 @@ def run(trial: Trial, args: argparse.Namespace) -> bool:
     return subprocess.run(command, check=False).returncode == 0
 
 
+def train_seconds(train: Path) -> float:
+    """The train stage's seconds, with those of the shorter runs a grown training continued."""
+    manifest = json.loads((train / MANIFEST).read_text())
+    earlier = manifest["metrics"].get("continued_from")
+    return manifest["duration_s"] + (train_seconds(train.parent / earlier) if earlier else 0.0)
+
+
 def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
     """One seed's row, or None while its trial has not finished."""
     train = trial_artifact(trial, args.profile, "train")
@@ -167,7 +174,7 @@ def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
         "seed": trial.seed,
         "start_zero_s": report["start_zero"]["mean_survival_s"],
         **{m: report["fixed_grid"][m] for m in SPECS[args.study].columns[1:]},
-        "wall_min": round(manifest["duration_s"] / 60, 2),
+        "wall_min": round(train_seconds(train) / 60, 2),
         "samples": params["iterations"] * params["env"]["num_envs"] * params["ppo"]["steps_per_env"],
         "train_key": manifest["key"],
         "train_folder": str(train),
@@ -219,7 +226,7 @@ def markdown(result: dict) -> str:
         (
             "Mean ± 95 % Student-t half-width over seeds. start_zero_s: one deterministic rollout from frame 0; "
             "the other columns: the fixed grid of starts (one per second), nominal physics, full mesh model; "
-            "wall_min: the train stage's minutes."
+            "wall_min: the train stage's minutes (a grown training adds the run it continued)."
         ),
         "",
         "| arm | n | " + " | ".join(columns) + " |",

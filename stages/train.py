@@ -20,6 +20,8 @@ from rd_pipeline.robots.assets import model_files
 from rd_pipeline.sampling.sampler import SamplerConfig
 
 CURVE_FILE = "learning_curve.png"
+CONTINUED_FILE = "continued_from.txt"
+"""Key of the shorter finished run a grown training continued (its first iterations are that run's)."""
 PROFILE_FILE = "sampler_profile.png"
 
 
@@ -118,6 +120,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         shutil.copy2(shorter.path / LOG_FILE, work / LOG_FILE)
         done = shorter.manifest["params"]["iterations"]
         start_iteration = load_checkpoint(work / CHECKPOINT_DIR / f"model_{done}.pt", ppo, env)
+        (work / CONTINUED_FILE).write_text(shorter.key + "\n")
         ctx.console.print(f"  continuing the {done}-iteration run {shorter.key}")
     with ctx.progress(p.iterations - start_iteration, f"PPO {ctx.robot}") as advance:
         train(
@@ -145,8 +148,10 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         ctx.out_dir / PROFILE_FILE,
     )
     last = rows[-1]
+    continued = ctx.out_dir / CONTINUED_FILE
     return {
         "iterations": p.iterations,
+        "continued_from": continued.read_text().strip() if continued.exists() else None,
         "num_envs": p.env.num_envs,
         "clip_frames": [start, end],
         "observation_size": observation_size,

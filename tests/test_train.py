@@ -211,6 +211,9 @@ def test_a_longer_run_with_resume_continues_the_shorter_one_bit_for_bit(artifact
     timing = ("seconds", "samples_per_s")
     strip = lambda rows: [{k: v for k, v in row.items() if k not in timing} for row in rows]
     assert [row["iteration"] for row in log(tmp_path / "grown")] == [1, 2, 3, 4]
+    metrics = lambda run: json.loads((run / "manifest.json").read_text())["metrics"]
+    assert metrics(tmp_path / "grown")["continued_from"] == short.name
+    assert metrics(grown)["continued_from"] is None
     assert strip(log(tmp_path / "grown")) == strip(log(grown))
     a = torch.load(tmp_path / "grown" / "checkpoints" / "model_4.pt", weights_only=False)
     b = torch.load(grown / "checkpoints" / "model_4.pt", weights_only=False)
