@@ -179,7 +179,10 @@ def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
         "train_key": manifest["key"],
         "train_folder": str(train),
     }
-    log = [json.loads(line) for line in (train / LOG_FILE).read_text().splitlines()]
+    rows = [json.loads(line) for line in (train / LOG_FILE).read_text().splitlines()]
+    # Logs of runs resumed before the trainer dropped the rows past the checkpoint repeat them
+    # (identically: training is deterministic); each iteration counts once.
+    log = list({row["iteration"]: row for row in rows}.values())
     row["curve"] = {
         "iteration": [r["iteration"] for r in log],
         "episode_length_s": [r["episode_length_s"] or 0.0 for r in log],

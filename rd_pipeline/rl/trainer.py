@@ -64,6 +64,7 @@ def train(
     history: list[dict] = []
     out_dir.mkdir(parents=True, exist_ok=True)
     obs = env.get_observations()
+    _drop_rows_after(out_dir / LOG_FILE, start_iteration)
     log = (out_dir / LOG_FILE).open("a")
     cores = torch.get_num_threads()
     for iteration in range(start_iteration, iterations):
@@ -105,6 +106,16 @@ def train(
             save_checkpoint(out_dir / CHECKPOINT_DIR / f"model_{done}.pt", done, ppo, env)
     log.close()
     return history
+
+
+def _drop_rows_after(path: Path, iteration: int) -> None:
+    """Keep the log rows up to `iteration`: an interrupted run logged iterations past its last
+    checkpoint, and the resumed run logs them again."""
+    if not path.exists():
+        return
+    lines = path.read_text().splitlines()
+    kept = [line for line in lines if json.loads(line)["iteration"] <= iteration]
+    path.write_text("".join(line + "\n" for line in kept))
 
 
 def plot_learning_curve(rows: list[dict], path: Path) -> None:
