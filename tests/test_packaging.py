@@ -40,6 +40,7 @@ def test_a_plain_install_runs_from_another_directory(tmp_path: Path) -> None:
         "h1.toml",
         "h1_2.toml",
     ]
+    assert (site / "rd_pipeline" / "robot_configs" / "interop" / "mjlab.toml").is_file()
     script = "import sys, rd_pipeline; from rd_pipeline.cli import main; print(rd_pipeline.__file__); sys.exit(main(sys.argv[1:]))"
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
