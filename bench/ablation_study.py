@@ -158,6 +158,8 @@ def train_seconds(train: Path) -> float:
     """The train stage's seconds, with those of the shorter runs a grown training continued."""
     manifest = json.loads((train / MANIFEST).read_text())
     earlier = manifest["metrics"].get("continued_from")
+    if earlier and not (train.parent / earlier / MANIFEST).is_file():
+        sys.exit(f"{train}: continues run {earlier}, which is no longer in the store; its minutes are unknown")
     return manifest["duration_s"] + (train_seconds(train.parent / earlier) if earlier else 0.0)
 
 

@@ -206,7 +206,7 @@ def view(cmd: View, console: Console) -> int:
 
 def export_motion(cmd: ExportMotion, console: Console) -> int:
     from rd_pipeline.export.motion_csv import write_dataset_csv
-    from rd_pipeline.export.motion_mjlab import missing_joints, write_mjlab_npz
+    from rd_pipeline.export.motion_mjlab import write_mjlab_npz
     from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
     from rd_pipeline.robots import load_robot
 
@@ -218,14 +218,14 @@ def export_motion(cmd: ExportMotion, console: Console) -> int:
     folder = next(o.path for o in outcomes if o.name == made_by)
     reference = ReferenceMotion.load(folder / REFERENCE_FILE)
     robot = load_robot(cmd.robot)
+    missing: list[str] = []
     if cmd.format == "csv":
         fps = cmd.fps or 30.0
         frames = write_dataset_csv(reference, robot.config, cmd.out, fps)
     else:
         fps = cmd.fps or reference.fps
-        frames = write_mjlab_npz(reference, robot, cmd.out, fps)
+        frames, missing = write_mjlab_npz(reference, robot, cmd.out, fps)
     console.print(f"wrote {cmd.out}: {frames} frames at {fps:g} fps from {made_by} {folder.name}", highlight=False)
-    missing = missing_joints(robot) if cmd.format == "mjlab" else []
     if missing:
         console.print(f"mjlab's {cmd.robot} model has joints this one lacks, written as 0: {', '.join(missing)}")
     return 0

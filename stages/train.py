@@ -106,16 +106,20 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     work = ctx.work_dir or ctx.out_dir
     checkpoints = sorted((work / CHECKPOINT_DIR).glob("model_*.pt"), key=lambda f: int(f.stem.split("_")[1]))
     start_iteration = 0
-    shorter = _longest_shorter_run(ctx.shorter, p.iterations) if ctx.resume and not checkpoints else None
+    shorter = None
     if ctx.resume and checkpoints:
         start_iteration = load_checkpoint(checkpoints[-1], ppo, env)
         ctx.console.print(f"  resuming from {checkpoints[-1].name}")
-    elif work.exists() and work != ctx.out_dir:
-        shutil.rmtree(work)
+    else:
+        if work.exists() and work != ctx.out_dir:
+            shutil.rmtree(work)
+        if ctx.resume:
+            shorter = _longest_shorter_run(ctx.shorter, p.iterations)
     work.mkdir(parents=True, exist_ok=True)
     if shorter is not None:
         # Nothing in training depends on the total number of iterations, so a longer run is the
-        # shorter one continued: its log and checkpoints are copied and its last checkpoint resumed.
+        # shorter one continued: its log and checkpoints are copied (its final checkpoint among them,
+        # even off the checkpoint_every grid) and its last checkpoint resumed.
         shutil.copytree(shorter.path / CHECKPOINT_DIR, work / CHECKPOINT_DIR)
         shutil.copy2(shorter.path / LOG_FILE, work / LOG_FILE)
         done = shorter.manifest["params"]["iterations"]

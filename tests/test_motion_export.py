@@ -147,4 +147,5 @@ def test_every_robot_exports_both_formats(
         assert f"from {made_by} " in result.stderr
     columns = np.loadtxt(tmp_path / f"{robot_name}.csv", delimiter=",").shape[1]
     assert columns == 7 + len(robot.config.csv_joints)
-    assert np.load(tmp_path / f"{robot_name}.npz")["joint_pos"].shape[1] == len(robot.config.csv_joints)
+    task_joints = hinge_names(task_model(robot)[0])
+    assert np.load(tmp_path / f"{robot_name}.npz")["joint_pos"].shape[1] == len(task_joints)

@@ -305,12 +305,14 @@ def _shorter_runs(store: ArtifactStore, entry: PlannedStage, robot: str | None, 
     found = []
     for key in store.keys(stage.name, robot, motion):
         ref = store.find(stage.name, robot, motion, key)
-        if ref is None or key == entry.key:
+        if ref is None or key == entry.key or ref.damage() is not None:
             continue
         params = ref.manifest.get("params", {})
         if fixed(params) != wanted:
             continue
-        if artifact_key(stage.name, stage.version, params, entry.upstream, entry.input_hashes) == key:
+        recomputed = artifact_key(stage.name, stage.version, params, entry.upstream, entry.input_hashes)
+        # Its files are about to seed this run: check their hashes, not only their sizes.
+        if recomputed == key and ref.damage(full=True) is None:
             found.append(ref)
     return tuple(found)
 

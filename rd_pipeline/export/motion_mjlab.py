@@ -45,12 +45,6 @@ def hinge_names(model: mujoco.MjModel) -> list[str]:
     return [model.joint(i).name for i in hinges]
 
 
-def missing_joints(robot: Robot) -> list[str]:
-    """Joints of the task model that the pipeline's model lacks (written as 0)."""
-    model, _ = task_model(robot)
-    return [name for name in hinge_names(model) if name not in robot.config.joint_names]
-
-
 def _root_and_joints(reference: ReferenceMotion, fps: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(root_pos, root_quat wxyz, joint_pos) at `fps`; the reference's own frames at its rate."""
     if fps == reference.fps:
@@ -59,8 +53,9 @@ def _root_and_joints(reference: ReferenceMotion, fps: float) -> tuple[np.ndarray
     return root_pos, root_quat_xyzw[:, [3, 0, 1, 2]], joint_pos
 
 
-def write_mjlab_npz(reference: ReferenceMotion, robot: Robot, path: Path, fps: float) -> int:
-    """Write `reference` at `fps` in the layout of mjlab's task model; returns the number of frames."""
+def write_mjlab_npz(reference: ReferenceMotion, robot: Robot, path: Path, fps: float) -> tuple[int, list[str]]:
+    """Write `reference` at `fps` in the layout of mjlab's task model; returns the number of frames
+    and the task model's joints the reference lacks (written as 0)."""
     model, frame_offsets = task_model(robot)
     root_pos, root_quat, joint_pos = _root_and_joints(reference, fps)
     hinges = hinge_names(model)
@@ -99,4 +94,5 @@ def write_mjlab_npz(reference: ReferenceMotion, robot: Robot, path: Path, fps: f
     partial = path.with_name(f".{path.name}.partial.npz")
     np.savez(partial, **arrays)
     partial.replace(path)
-    return len(layout)
+    missing = [name for name in hinges if name not in reference.joint_names]
+    return len(layout), missing

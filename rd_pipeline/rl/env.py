@@ -1,8 +1,10 @@
 """The tracking environment: N robots following one reference motion, stepped by a physics backend.
 
 Built like mjlab's manager-based tasks: actions, observations, rewards, terminations, curricula and
-events are configured terms (`EnvConfig`), and `step` only wires them together. Everything is
-batched torch on the configured device; MuJoCo is only reached through the backend seam
+events are configured terms (`EnvConfig`), and `step` only wires them together. Simulation and
+terms are batched torch on the configured device; episode bookkeeping (lengths, start segments,
+pushes) stays on the host beside the random generator and the sampler, so a step reads only its done
+flags back from the device. MuJoCo is only reached through the backend seam
 (`rd_pipeline.rl.backend`). Observations come in rsl-rl groups (`policy`, `critic`); rewards come
 per group, one column per critic value head.
 """
@@ -137,10 +139,10 @@ class TrackingEnv:
         from a segment the sampler picks."""
         if len(env_ids) == 0:
             return
-        env_ids = env_ids.cpu()
+        host_ids = env_ids.cpu()
         if frames is None:
-            segments = self.sampler.sample(len(env_ids))
-            offsets = torch.as_tensor(self.rng.random(len(env_ids))) * self.segment_lengths[segments]
+            segments = self.sampler.sample(len(host_ids))
+            offsets = torch.as_tensor(self.rng.random(len(host_ids))) * self.segment_lengths[segments]
             frames = self.segment_starts[segments] + offsets.long()
             frames = frames.clamp(max=self.max_episode_length - 2)
         else:
@@ -151,16 +153,16 @@ class TrackingEnv:
         qpos, qvel = events.rsi_state(
             self.config, self.ref, frames, model.nq, model.nv, self.qpos_idx, self.dof_idx, self.joint_range, self.rng
         )
-        self.start_segment[env_ids] = segments
-        self.episode_length_buf[env_ids] = 0
-        env_ids = env_ids.to(self.device)
-        self.backend.set_state(env_ids, qpos, qvel)
-        self.frame[env_ids] = frames.to(self.device)
-        self.action_history[env_ids] = 0.0
-        self.feet_air_time[env_ids] = 0.0
-        self.target_queue[env_ids] = qpos[:, self.qpos_idx].to(DTYPE)[:, None]
+        self.start_segment[host_ids] = segments
+        self.episode_length_buf[host_ids] = 0
+        device_ids = host_ids.to(self.device)
+        self.backend.set_state(device_ids, qpos, qvel)
+        self.frame[device_ids] = frames.to(self.device)
+        self.action_history[device_ids] = 0.0
+        self.feet_air_time[device_ids] = 0.0
+        self.target_queue[device_ids] = qpos[:, self.qpos_idx].to(DTYPE)[:, None]
         if self.obs_frames is not None:
-            self.obs_frames[env_ids] = self._actor_frame()[env_ids, None]
+            self.obs_frames[device_ids] = self._actor_frame()[device_ids, None]
 
     # -- observations ------------------------------------------------------------------------
     def _state(self) -> dict[str, torch.Tensor]:

@@ -68,7 +68,8 @@ def random_joint_forces(
 
 @dataclass(frozen=True)
 class ReferenceFrames:
-    """The reference quantities reset draws from, (T, ...) tensors on the training device."""
+    """The reference quantities reset draws from: (T, ...) tensors on the training device, and the
+    root orientations again on the host."""
 
     root_pos: torch.Tensor
     root_quat: torch.Tensor

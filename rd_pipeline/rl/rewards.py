@@ -185,7 +185,8 @@ class AdaptiveSigma:
     def update(self, errors: dict[str, torch.Tensor]) -> None:
         for name, origin in self.origin.items():
             ema = (1 - self.alpha) * self.variance[name] + self.alpha * errors[name].mean().double()
-            self.variance[name] = ema.clamp(max=origin)
+            # fmin keeps the origin when a batch error is NaN; clamp would carry the NaN on for good.
+            self.variance[name] = torch.fmin(ema, ema.new_tensor(origin))
 
     def sigma(self) -> dict[str, torch.Tensor]:
         return {name: variance**0.5 for name, variance in self.variance.items()}

@@ -31,6 +31,8 @@ def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, env: Tracking
             "sampler": env.sampler.state_dict(),
             "env": env.state_dict(),
             "torch_rng": torch.get_rng_state(),
+            # Action noise is drawn on the training device: a CUDA run needs its generators too.
+            "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
         },
         partial,
     )
@@ -46,6 +48,8 @@ def load_checkpoint(path: Path, ppo: MultiHeadPPO, env: TrackingEnv) -> int:
     env.sampler.load_state_dict(state["sampler"])
     env.load_state_dict(state["env"])
     torch.set_rng_state(state["torch_rng"])
+    if state.get("cuda_rng") is not None:
+        torch.cuda.set_rng_state_all(state["cuda_rng"])
     return int(state["iteration"])
 
 
@@ -110,12 +114,24 @@ def train(
 
 def _drop_rows_after(path: Path, iteration: int) -> None:
     """Keep the log rows up to `iteration`: an interrupted run logged iterations past its last
-    checkpoint, and the resumed run logs them again."""
+    checkpoint (the last line possibly torn), and the resumed run logs them again."""
     if not path.exists():
         return
     lines = path.read_text().splitlines()
-    kept = [line for line in lines if json.loads(line)["iteration"] <= iteration]
-    path.write_text("".join(line + "\n" for line in kept))
+    kept = [line for line in lines if _logged_iteration(line) <= iteration]
+    if kept == lines:
+        return
+    partial = path.with_suffix(".partial")
+    partial.write_text("".join(line + "\n" for line in kept))
+    os.replace(partial, path)
+
+
+def _logged_iteration(line: str) -> float:
+    """The iteration of a log line; infinity for a line cut short by an interruption."""
+    try:
+        return json.loads(line)["iteration"]
+    except (json.JSONDecodeError, KeyError):
+        return float("inf")
 
 
 def plot_learning_curve(rows: list[dict], path: Path) -> None:
