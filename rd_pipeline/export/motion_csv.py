@@ -8,6 +8,7 @@ the pose those joints hold in the model.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -34,13 +35,20 @@ def resample_root_and_joints(reference: ReferenceMotion, fps: float) -> tuple[np
     return root_pos, root_quat, joint_pos
 
 
+def joints_by_name(joint_pos: np.ndarray, names: Sequence[str], layout: Sequence[str]) -> np.ndarray:
+    """(T, len(layout)) angles of `joint_pos` (columns `names`) in another joint order; joints of
+    `layout` missing from `names` are 0."""
+    columns = np.zeros((len(joint_pos), len(layout)))
+    for i, name in enumerate(layout):
+        if name in names:
+            columns[:, i] = joint_pos[:, names.index(name)]
+    return columns
+
+
 def write_dataset_csv(reference: ReferenceMotion, config: RobotConfig, path: Path, fps: float) -> int:
     """Write `reference` at `fps` in the dataset layout of `config`; returns the number of rows."""
     root_pos, root_quat, joint_pos = resample_root_and_joints(reference, fps)
-    columns = np.zeros((len(root_pos), len(config.csv_joints)))
-    for i, name in enumerate(config.csv_joints):
-        if name in reference.joint_names:
-            columns[:, i] = joint_pos[:, reference.joint_names.index(name)]
+    columns = joints_by_name(joint_pos, reference.joint_names, config.csv_joints)
     table = np.concatenate([root_pos, root_quat, columns], axis=1)
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(f".{path.name}.partial")

@@ -19,8 +19,8 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rd_pipeline.export.motion_csv import resample_root_and_joints
-from rd_pipeline.motion.reference import ReferenceMotion, angular_velocity, finite_difference
+from rd_pipeline.export.motion_csv import joints_by_name, resample_root_and_joints
+from rd_pipeline.motion.reference import ReferenceMotion, angular_velocity, body_poses, finite_difference
 from rd_pipeline.paths import ROBOT_CONFIG_DIR
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.assets import asset_path
@@ -59,21 +59,10 @@ def write_mjlab_npz(reference: ReferenceMotion, robot: Robot, path: Path, fps: f
     model, frame_offsets = task_model(robot)
     root_pos, root_quat, joint_pos = _root_and_joints(reference, fps)
     hinges = hinge_names(model)
-    layout = np.zeros((len(joint_pos), len(hinges)))
-    for column, name in enumerate(hinges):
-        if name in reference.joint_names:
-            layout[:, column] = joint_pos[:, reference.joint_names.index(name)]
+    layout = joints_by_name(joint_pos, reference.joint_names, hinges)
     qpos_address = model.jnt_qposadr[[model.joint(name).id for name in hinges]]
-    data = mujoco.MjData(model)
-    body_pos = np.empty((len(layout), model.nbody - 1, 3))
-    body_quat = np.empty((len(layout), model.nbody - 1, 4))
-    for t in range(len(layout)):
-        data.qpos[:3] = root_pos[t]
-        data.qpos[3:7] = root_quat[t]
-        data.qpos[qpos_address] = layout[t]
-        mujoco.mj_kinematics(model, data)
-        body_pos[t] = data.xpos[1:]
-        body_quat[t] = data.xquat[1:]
+    bodies = np.arange(1, model.nbody)
+    body_pos, body_quat = body_poses(model, root_pos, root_quat, qpos_address, layout, bodies)
     for body, offset in frame_offsets.items():
         index = model.body(body).id - 1
         turn = Rotation.from_quat(body_quat[:, index], scalar_first=True)

@@ -91,15 +91,8 @@ def reference_from_joint_trajectory(
     foot_contact: np.ndarray,
 ) -> ReferenceMotion:
     """Complete a joint-space trajectory with body poses (MuJoCo FK) and finite-difference velocities."""
-    model, data = robot.model, mujoco.MjData(robot.model)
-    n_frames, body_ids = joint_pos.shape[0], np.array(list(robot.body_ids.values()))
-    body_pos = np.empty((n_frames, len(body_ids), 3))
-    body_quat = np.empty((n_frames, len(body_ids), 4))
-    for t in range(n_frames):
-        data.qpos[:3], data.qpos[3:7] = root_pos[t], root_quat[t]
-        data.qpos[robot.qpos_indices] = joint_pos[t]
-        mujoco.mj_kinematics(model, data)
-        body_pos[t], body_quat[t] = data.xpos[body_ids], data.xquat[body_ids]
+    body_ids = np.array(list(robot.body_ids.values()))
+    body_pos, body_quat = body_poses(robot.model, root_pos, root_quat, robot.qpos_indices, joint_pos, body_ids)
     dt = 1.0 / fps
     return ReferenceMotion(
         fps=fps,
@@ -115,6 +108,30 @@ def reference_from_joint_trajectory(
         body_ang_vel_w=angular_velocity(body_quat, dt),
         foot_contact=foot_contact,
     )
+
+
+def body_poses(
+    model: mujoco.MjModel,
+    root_pos: np.ndarray,
+    root_quat: np.ndarray,
+    qpos_address: np.ndarray,
+    joint_pos: np.ndarray,
+    body_ids: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(T, B, 3) world positions and (T, B, 4) wxyz orientations of `body_ids` by MuJoCo forward
+    kinematics of a floating-base trajectory, `joint_pos` written at `qpos_address`."""
+    data = mujoco.MjData(model)
+    n_frames = joint_pos.shape[0]
+    body_pos = np.empty((n_frames, len(body_ids), 3))
+    body_quat = np.empty((n_frames, len(body_ids), 4))
+    for t in range(n_frames):
+        data.qpos[:3] = root_pos[t]
+        data.qpos[3:7] = root_quat[t]
+        data.qpos[qpos_address] = joint_pos[t]
+        mujoco.mj_kinematics(model, data)
+        body_pos[t] = data.xpos[body_ids]
+        body_quat[t] = data.xquat[body_ids]
+    return body_pos, body_quat
 
 
 def finite_difference(values: np.ndarray, dt: float) -> np.ndarray:
