@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from rd_pipeline.artifacts.store import MANIFEST
-from rd_pipeline.commands import trial_artifact
+from rd_pipeline.commands import training_seconds, trial_artifact
 from rd_pipeline.evaluation.metrics import ERROR_METRICS, t_interval
 from rd_pipeline.evaluation.report import REPORT_JSON
 from rd_pipeline.rl.trainer import LOG_FILE
@@ -154,15 +154,6 @@ def run(trial: Trial, args: argparse.Namespace) -> bool:
     return subprocess.run(command, check=False).returncode == 0
 
 
-def train_seconds(train: Path) -> float:
-    """The train stage's seconds, with those of the shorter runs a grown training continued."""
-    manifest = json.loads((train / MANIFEST).read_text())
-    earlier = manifest["metrics"].get("continued_from")
-    if earlier and not (train.parent / earlier / MANIFEST).is_file():
-        sys.exit(f"{train}: continues run {earlier}, which is no longer in the store; its minutes are unknown")
-    return manifest["duration_s"] + (train_seconds(train.parent / earlier) if earlier else 0.0)
-
-
 def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
     """One seed's row, or None while its trial has not finished."""
     train = trial_artifact(trial, args.profile, "train")
@@ -176,7 +167,7 @@ def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
         "seed": trial.seed,
         "start_zero_s": report["start_zero"]["mean_survival_s"],
         **{m: report["fixed_grid"][m] for m in SPECS[args.study].columns[1:]},
-        "wall_min": round(train_seconds(train) / 60, 2),
+        "wall_min": round(training_seconds(train) / 60, 2),
         "samples": params["iterations"] * params["env"]["num_envs"] * params["ppo"]["steps_per_env"],
         "train_key": manifest["key"],
         "train_folder": str(train),

@@ -19,7 +19,7 @@ import sys
 from pathlib import Path
 
 from rd_pipeline.artifacts.store import MANIFEST
-from rd_pipeline.commands import trial_artifact
+from rd_pipeline.commands import training_seconds, trial_artifact
 from rd_pipeline.evaluation.report import REPORT_JSON, REPORT_MD
 from rd_pipeline.stages.train import CURVE_FILE, PROFILE_FILE
 from rd_pipeline.sweeps.runner import Trial
@@ -60,7 +60,7 @@ def main() -> None:
         "E_g_mpbpe": policy["fixed_grid"]["E_g_mpbpe"],
         "E_mpbpe": policy["fixed_grid"]["E_mpbpe"],
         "zero_action_start_zero_s": report["nominal"]["zero_action"]["start_zero"]["mean_survival_s"],
-        "wall_min": round(manifest["duration_s"] / 60, 2),
+        "wall_min": round(training_seconds(train) / 60, 2),
         "samples": params["iterations"] * params["env"]["num_envs"] * params["ppo"]["steps_per_env"],
         "action_mode": params["env"]["actions"]["mode"],
         "sampler": params["sampler"]["mode"],

@@ -278,6 +278,17 @@ def trial_artifact(trial, profile: str | None, stage: str) -> Path | None:
     return found.path if found else None
 
 
+def training_seconds(train: Path) -> float:
+    """A train artifact's seconds, with those of the shorter runs a grown training continued."""
+    manifest = json.loads((train / MANIFEST).read_text())
+    earlier = manifest["metrics"].get("continued_from")
+    if not earlier:
+        return manifest["duration_s"]
+    if not (train.parent / earlier / MANIFEST).is_file():
+        raise PipelineError(f"{train}: continues run {earlier}, which is no longer in the store; its time is unknown")
+    return manifest["duration_s"] + training_seconds(train.parent / earlier)
+
+
 def validation_report(trial, profile: str | None) -> Path | None:
     """The `report.json` a sweep trial's run produced, or None."""
     folder = trial_artifact(trial, profile, "validate")
