@@ -12,7 +12,9 @@ store and an interrupted training continues from its last checkpoint, so rerunni
 command continues the study. After every trial it rewrites `<out>.json`, `<out>.md` and
 `<out>_curves.png` (default out: `bench/results/<study>_study`) from the artifacts of the trials
 finished so far. Validation figures come from each trial's `validate` report (the exported policy on
-the full mesh model); a seed's wall time is its train stage's.
+the full mesh model); a seed's wall time is its train stage's. The report ends with the paper's
+findings judged on the seeds: supported, contradicted or undecided by Welch's 95% interval of the
+difference between the two arms.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ import numpy as np
 
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.commands import training_seconds, trial_artifact
-from rd_pipeline.evaluation.metrics import ERROR_METRICS, t_interval
+from rd_pipeline.evaluation.metrics import ERROR_METRICS, difference_interval, t_interval
 from rd_pipeline.evaluation.report import REPORT_JSON
 from rd_pipeline.rl.trainer import LOG_FILE
 from rd_pipeline.stages.train import PROFILE_FILE
@@ -68,6 +70,55 @@ PAPER_RESAMPLING = {
 
 
 @dataclass(frozen=True)
+class Claim:
+    """One of the paper's findings, judged on the seeds of two arms."""
+
+    statement: str
+    """The finding, as the paper states it."""
+    metric: str
+    """The per-seed figure it is judged on: a table column or a learning-curve statistic."""
+    better: str
+    """The arm the paper finds better."""
+    than: str
+    """The arm it is compared with."""
+    higher_is_better: bool
+    """Whether a larger value of `metric` is the better one."""
+
+
+RESIDUAL_CLAIMS = (
+    Claim("ALL learns faster early than SELECTIVE", "early_episode_length_s", "all", "selective", True),
+    Claim("ALL learns faster early than NONE", "early_episode_length_s", "all", "absolute", True),
+    Claim("SELECTIVE reaches a higher late return than ALL", "late_reward", "selective", "all", True),
+    Claim("SELECTIVE reaches a higher late return than NONE", "late_reward", "selective", "absolute", True),
+    Claim("SELECTIVE completes more fixed-grid starts than NONE", "completion_pct", "selective", "absolute", True),
+    Claim("SELECTIVE completes more fixed-grid starts than ALL", "completion_pct", "selective", "all", True),
+    Claim("SELECTIVE survives longer than NONE", "mean_survival_s", "selective", "absolute", True),
+    Claim("SELECTIVE survives longer than ALL", "mean_survival_s", "selective", "all", True),
+    Claim("SELECTIVE has a lower E_mpbpe than NONE", "E_mpbpe", "selective", "absolute", False),
+    Claim("SELECTIVE has a lower E_mpjpe than NONE", "E_mpjpe", "selective", "absolute", False),
+    Claim("ALL has a lower E_mpjpe than SELECTIVE", "E_mpjpe", "all", "selective", False),
+    Claim("ALL has a higher E_mpbpe than SELECTIVE", "E_mpbpe", "selective", "all", False),
+    Claim(
+        "(our reading, not the paper's) the masked joints are residual, the others absolute: "
+        "SELECTIVE survives start-zero longer than the reference-locked reading",
+        "start_zero_s",
+        "selective",
+        "reference_locked",
+        True,
+    ),
+)
+"""The residual study's findings (NONE is the absolute-action arm)."""
+SAMPLER_CLAIMS = tuple(
+    Claim(f"Combined sampling {verb} than {arm} sampling", metric, "combined", arm, True)
+    for arm in ("uniform", "distribution", "failure")
+    for metric, verb in (("completion_pct", "completes more starts"), ("mean_survival_s", "survives longer"))
+)
+"""The resampling ablation's findings."""
+CURVE_STATISTICS = ("early_episode_length_s", "late_episode_length_s", "late_reward")
+"""Per-seed learning-curve statistics: means over the first and over the last `--curve-window` iterations."""
+
+
+@dataclass(frozen=True)
 class StudySpec:
     """What one ablation runs and reports."""
 
@@ -83,6 +134,8 @@ class StudySpec:
     """The paper's figures for the same arms, quoted for orientation."""
     paper_caption: str
     """What the quoted figures are."""
+    claims: tuple[Claim, ...]
+    """The paper's findings this study can judge."""
 
 
 SPECS = {
@@ -94,6 +147,7 @@ SPECS = {
         paper=PAPER_TABLE_R5,
         paper_caption="The paper's Table r5 (dance2_subject4, GPU scale; survival in s, errors in mm/mrad), "
         "for orientation only: a different motion and budget.",
+        claims=RESIDUAL_CLAIMS,
     ),
     "sampler": StudySpec(
         title="Sampler ablation at CPU scale (the paper's resampling table)",
@@ -110,6 +164,7 @@ SPECS = {
         paper=PAPER_RESAMPLING,
         paper_caption="The paper's resampling table (a), threshold success in % (dance2_subject4, GPU scale), "
         "for orientation only: a different motion and budget.",
+        claims=SAMPLER_CLAIMS,
     ),
 }
 
@@ -181,7 +236,34 @@ def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
         "episode_length_s": [r["episode_length_s"] or 0.0 for r in log],
         "reward": [r["reward"] for r in log],
     }
+    window = args.curve_window
+    row["early_episode_length_s"] = round(float(np.mean(row["curve"]["episode_length_s"][:window])), 4)
+    row["late_episode_length_s"] = round(float(np.mean(row["curve"]["episode_length_s"][-window:])), 4)
+    row["late_reward"] = round(float(np.mean(row["curve"]["reward"][-window:])), 4)
     return row
+
+
+def judge(claim: Claim, arms: dict[str, list[dict]]) -> dict:
+    """A claim's verdict, from the difference of the two arms' means with Welch's 95% interval.
+
+    The difference is oriented so that a positive value favours the claim (better minus other for a
+    metric where higher is better, other minus better where lower is). Supported when the interval
+    lies above zero, contradicted when it lies below, undecided when it holds zero; not judged below
+    two seeds a side.
+    """
+    better = [seed[claim.metric] for seed in arms.get(claim.better, [])]
+    than = [seed[claim.metric] for seed in arms.get(claim.than, [])]
+    verdict = {"claim": claim.statement, "metric": claim.metric, "seeds": [len(better), len(than)]}
+    if len(better) < 2 or len(than) < 2:
+        return verdict | {"difference": None, "low": None, "high": None, "verdict": "not judged (under 2 seeds)"}
+    interval = difference_interval(better, than) if claim.higher_is_better else difference_interval(than, better)
+    if interval["low"] > 0:
+        word = "supported"
+    elif interval["high"] < 0:
+        word = "contradicted"
+    else:
+        word = "undecided"
+    return verdict | interval | {"verdict": word}
 
 
 def summary(args: argparse.Namespace) -> dict:
@@ -195,8 +277,10 @@ def summary(args: argparse.Namespace) -> dict:
                 if row is not None:
                     seeds.append(row)
                     samples.add(row["samples"])
-        table = {m: t_interval([s[m] for s in seeds]) for m in (*SPECS[args.study].columns, "wall_min")}
+        columns = (*SPECS[args.study].columns, *CURVE_STATISTICS, "wall_min")
+        table = {m: t_interval([s[m] for s in seeds]) for m in columns}
         arms.append({"arm": arm, "seeds": seeds, "table": table})
+    by_arm = {arm["arm"]: arm["seeds"] for arm in arms}
     return {
         "study": args.study,
         "robot": ROBOT,
@@ -204,7 +288,9 @@ def summary(args: argparse.Namespace) -> dict:
         "profile": args.profile,
         "sets": list(args.set),
         "samples_per_trial": min(samples) if len(samples) == 1 else sorted(samples),
+        "curve_window": args.curve_window,
         "arms": arms,
+        "claims": [judge(claim, by_arm) for claim in SPECS[args.study].claims],
     }
 
 
@@ -236,6 +322,34 @@ def markdown(result: dict) -> str:
         for s in arm["seeds"]:
             values = " | ".join(f"{s[m]}" for m in columns)
             lines.append(f"| {arm['arm']} | {s['seed']} | {values} |")
+    window = result["curve_window"]
+    lines += [
+        "",
+        f"Learning curves (mean ± 95 % CI over seeds): training episode length over the first and the last "
+        f"{window} iterations, and the mean reward per step over the last {window}.",
+        "",
+        "| arm | " + " | ".join(CURVE_STATISTICS) + " |",
+        "|" + "---|" * (len(CURVE_STATISTICS) + 1),
+    ]
+    for arm in result["arms"]:
+        lines.append(f"| {arm['arm']} | " + " | ".join(format_cell(arm["table"][m]) for m in CURVE_STATISTICS) + " |")
+    lines += [
+        "",
+        "The paper's findings against these seeds: the difference of the two arms' means with Welch's 95 % "
+        "interval, signed so that a positive value favours the finding (for errors: the other arm's minus the "
+        "better arm's). Supported when the interval lies above zero, contradicted when below, undecided when "
+        "it holds zero.",
+        "",
+        "| finding | metric | seeds | difference | 95 % interval | verdict |",
+        "|---|---|---|---|---|---|",
+    ]
+    for claim in result["claims"]:
+        interval = "–" if claim["low"] is None else f"[{claim['low']}, {claim['high']}]"
+        difference = "–" if claim["difference"] is None else f"{claim['difference']}"
+        seeds = "/".join(str(n) for n in claim["seeds"])
+        lines.append(
+            f"| {claim['claim']} | {claim['metric']} | {seeds} | {difference} | {interval} | {claim['verdict']} |"
+        )
     quoted = sorted({column for row in spec.paper.values() for column in row}, key=columns.index)
     lines += ["", spec.paper_caption, "", "| arm | " + " | ".join(quoted) + " |", "|" + "---|" * (len(quoted) + 1)]
     for arm, row in spec.paper.items():
@@ -313,6 +427,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, help="default: bench/results/<study>_study")
     parser.add_argument("--collect", action="store_true", help="only rewrite the results from finished trials")
     parser.add_argument("--smooth", type=int, default=25, help="moving-mean window of the curves, in iterations")
+    parser.add_argument("--curve-window", type=int, default=200, help="iterations of the early and late curve means")
     args = parser.parse_args()
     spec = SPECS[args.study]
     args.arms = args.arms or list(spec.arms)

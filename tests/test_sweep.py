@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import cli
 
@@ -67,3 +68,23 @@ def test_ablate_residual_writes_the_paper_table(artifacts: Path) -> None:
     assert sorted(row["variant"] for row in summary) == ["absolute", "all", "selective"]
     # The baseline is the reference fed to PD in every arm, `absolute` included.
     assert len({row["zero_action_start_zero_survival_s"] for row in summary}) == 1
+
+
+def test_difference_interval_is_welchs_and_exact_without_spread() -> None:
+    from scipy import stats
+
+    from rd_pipeline.evaluation.metrics import difference_interval
+
+    first = [9.98, 1.94, 9.64]
+    second = [2.68, 9.98]
+    interval = difference_interval(first, second)
+    var_first = np.var(first, ddof=1) / 3
+    var_second = np.var(second, ddof=1) / 2
+    dof = (var_first + var_second) ** 2 / (var_first**2 / 2 + var_second**2 / 1)
+    half = stats.t.ppf(0.975, dof) * np.sqrt(var_first + var_second)
+    difference = np.mean(first) - np.mean(second)
+    assert interval["difference"] == pytest.approx(difference, abs=1e-3)
+    assert interval["low"] == pytest.approx(difference - half, abs=1e-3)
+    assert interval["high"] == pytest.approx(difference + half, abs=1e-3)
+    assert difference_interval([9.98, 9.98], [0.92, 0.92]) == {"difference": 9.06, "low": 9.06, "high": 9.06}
+    assert difference_interval([9.98], [0.92, 0.96])["low"] is None

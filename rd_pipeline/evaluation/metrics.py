@@ -75,3 +75,21 @@ def t_interval(values: list[float]) -> dict[str, float | int | None]:
         return {"mean": round(float(array[0]), 3), "ci95": None, "n": 1}
     half = stats.t.ppf(0.975, len(array) - 1) * array.std(ddof=1) / np.sqrt(len(array))
     return {"mean": round(float(array.mean()), 3), "ci95": round(float(half), 3), "n": len(array)}
+
+
+def difference_interval(first: list[float], second: list[float]) -> dict[str, float | None]:
+    """Mean of `first` minus mean of `second`, with Welch's 95% interval (None below two seeds a side)."""
+    a = np.asarray(first, dtype=float)
+    b = np.asarray(second, dtype=float)
+    difference = float(a.mean() - b.mean())
+    if len(a) < 2 or len(b) < 2:
+        return {"difference": round(difference, 3), "low": None, "high": None}
+    if a.std() == 0 and b.std() == 0:
+        # No spread on either side: the interval is the difference itself (Welch's is undefined).
+        return {"difference": round(difference, 3), "low": round(difference, 3), "high": round(difference, 3)}
+    interval = stats.ttest_ind(a, b, equal_var=False).confidence_interval(0.95)
+    return {
+        "difference": round(difference, 3),
+        "low": round(float(interval.low), 3),
+        "high": round(float(interval.high), 3),
+    }
