@@ -88,12 +88,15 @@ class Claim:
 RESIDUAL_CLAIMS = (
     Claim("ALL learns faster early than SELECTIVE", "early_episode_length_s", "all", "selective", True),
     Claim("ALL learns faster early than NONE", "early_episode_length_s", "all", "absolute", True),
-    Claim("SELECTIVE reaches a higher late return than ALL", "late_reward", "selective", "all", True),
-    Claim("SELECTIVE reaches a higher late return than NONE", "late_reward", "selective", "absolute", True),
-    Claim("SELECTIVE completes more fixed-grid starts than NONE", "completion_pct", "selective", "absolute", True),
-    Claim("SELECTIVE completes more fixed-grid starts than ALL", "completion_pct", "selective", "all", True),
-    Claim("SELECTIVE survives longer than NONE", "mean_survival_s", "selective", "absolute", True),
-    Claim("SELECTIVE survives longer than ALL", "mean_survival_s", "selective", "all", True),
+    *(
+        Claim(f"SELECTIVE {verb} than {name}", metric, "selective", arm, True)
+        for arm, name in (("absolute", "NONE"), ("all", "ALL"))
+        for metric, verb in (
+            ("late_reward", "reaches a higher late return"),
+            ("completion_pct", "completes more fixed-grid starts"),
+            ("mean_survival_s", "survives longer"),
+        )
+    ),
     Claim("SELECTIVE has a lower E_mpbpe than NONE", "E_mpbpe", "selective", "absolute", False),
     Claim("SELECTIVE has a lower E_mpjpe than NONE", "E_mpjpe", "selective", "absolute", False),
     Claim("ALL has a lower E_mpjpe than SELECTIVE", "E_mpjpe", "all", "selective", False),
