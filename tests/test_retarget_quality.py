@@ -91,7 +91,8 @@ def test_penetration_matches_full_mesh_in_mujoco(g1, g1_dance) -> None:
     reference, quality = g1_dance
     lowest = FootMeshes.from_robot(g1).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
     frame, foot = np.unravel_index(np.argmin(lowest), lowest.shape)
-    model, data = g1.model, mujoco.MjData(g1.model)
+    model = g1.model
+    data = mujoco.MjData(model)
     data.qpos[:3], data.qpos[3:7] = reference.root_pos[frame], reference.root_quat[frame]
     data.qpos[g1.qpos_indices] = reference.joint_pos[frame]
     mujoco.mj_kinematics(model, data)
@@ -140,7 +141,8 @@ def test_velocity_ramp_counts_frames_above_the_limit(g1, speed_factor: float, ex
 
 
 def test_jerk_of_a_cubic(g1) -> None:
-    a, fps = 0.5, 50.0
+    a = 0.5
+    fps = 50.0
     t = np.arange(50) / fps
     joint_pos = _standing(g1, 50) + a * t[:, None] ** 3
     # The third difference of a cubic is exact, so every frame (ends included) sees d3q/dt3 = 6a.
@@ -157,7 +159,8 @@ def test_elbow_in_torso_counts_as_self_collision(g1) -> None:
     reference = _hand_built(g1, joint_pos)
 
     # Hand check with MuJoCo: the elbow is well inside the torso, far beyond the 5 mm threshold.
-    model, data = g1.model, mujoco.MjData(g1.model)
+    model = g1.model
+    data = mujoco.MjData(model)
     data.qpos[:3], data.qpos[3:7] = reference.root_pos[5], reference.root_quat[5]
     data.qpos[g1.qpos_indices] = pose
     mujoco.mj_kinematics(model, data)

@@ -57,7 +57,8 @@ class DeployController:
     def __init__(self, spec: PolicySpec, model: mujoco.MjModel, reference: ReferenceMotion, rollouts: int) -> None:
         self.spec = spec
         joints = spec.get("joints")
-        actuated, policy = joints["actuated"], joints["policy"]
+        actuated = joints["actuated"]
+        policy = joints["policy"]
         self.qpos_idx = np.array([model.jnt_qposadr[model.joint(j).id] for j in policy])
         self.dof_idx = np.array([model.jnt_dofadr[model.joint(j).id] for j in policy])
         default = np.asarray(joints["default_pos"])

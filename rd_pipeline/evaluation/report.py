@@ -49,7 +49,8 @@ def write_markdown(report: dict, out_dir: Path) -> None:
         "|---|---|---|---|" + "---|" * len(SUCCESS_THRESHOLDS_S),
     ]
     for name in CONTROLLERS:
-        grid, zero = report["nominal"][name]["fixed_grid"], report["nominal"][name]["start_zero"]
+        grid = report["nominal"][name]["fixed_grid"]
+        zero = report["nominal"][name]["start_zero"]
         cells = [_cell(zero["mean_survival_s"]), _cell(grid["completion_pct"]), _cell(grid["mean_survival_s"])]
         cells += [_cell(grid[f"success_{t}s_pct"]) for t in SUCCESS_THRESHOLDS_S]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")

@@ -225,12 +225,14 @@ def _axis_rotation(axis: str, angle: np.ndarray) -> np.ndarray:
 
 def forward_kinematics(clip: BvhClip) -> tuple[np.ndarray, np.ndarray]:
     """Global joint positions (T, J, 3) in file units and rotation matrices (T, J, 3, 3)."""
-    n_frames, n_joints = clip.channels.shape[0], len(clip.joints)
+    n_frames = clip.channels.shape[0]
+    n_joints = len(clip.joints)
     local_rot = np.broadcast_to(np.eye(3), (n_frames, n_joints, 3, 3)).copy()
     local_pos = np.empty((n_frames, n_joints, 3))
     for j, joint in enumerate(clip.joints):
         local_pos[:, j] = joint.offset
-        rot_columns, axes = [], ""
+        rot_columns = []
+        axes = ""
         for k, channel in enumerate(joint.channels):
             column = clip.channels[:, joint.first_channel + k]
             if channel in _POSITION_CHANNELS:

@@ -9,7 +9,8 @@ torch = lazy_import("torch")
 
 def rotate_inverse(quat: torch.Tensor, vec: torch.Tensor) -> torch.Tensor:
     """Express world vectors `vec` (..., 3) in the frame of `quat` (..., 4): R(q)^T v."""
-    w, xyz = quat[..., :1], quat[..., 1:]
+    w = quat[..., :1]
+    xyz = quat[..., 1:]
     t = 2.0 * torch.cross(xyz, vec, dim=-1)
     return vec - w * t + torch.cross(xyz, t, dim=-1)
 

@@ -73,7 +73,8 @@ def train(
     cores = torch.get_num_threads()
     for iteration in range(start_iteration, iterations):
         began = time.perf_counter()
-        lengths, rewards = [], []
+        lengths = []
+        rewards = []
         # While collecting, the physics threads want the cores: torch's idle workers would spin on
         # them between the policy's small matrix products. The update gets every core.
         torch.set_num_threads(1)

@@ -67,7 +67,8 @@ def flatness(marginal: np.ndarray, support: np.ndarray) -> dict[str, np.ndarray]
     Bins no segment ever reaches cannot be filled by any weighting, so uniform is taken over the
     support: total variation (0 = flat) and KL(marginal || uniform) in nats.
     """
-    tv, kl = [], []
+    tv = []
+    kl = []
     for row, mask in zip(marginal, support):
         p = row[mask] / row[mask].sum()
         u = 1.0 / mask.sum()

@@ -73,7 +73,8 @@ def segment_bounds(n_frames: int, fps: float, segment_s: float, min_last_s: floa
     lengths = np.minimum(size, n_frames - starts)
     if len(starts) > 1 and lengths[-1] < min_last_s * fps:
         lengths[-2] += lengths[-1]
-        starts, lengths = starts[:-1], lengths[:-1]
+        starts = starts[:-1]
+        lengths = lengths[:-1]
     return starts, lengths
 
 
