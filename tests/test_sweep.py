@@ -88,3 +88,22 @@ def test_difference_interval_is_welchs_and_exact_without_spread() -> None:
     assert interval["high"] == pytest.approx(difference + half, abs=1e-3)
     assert difference_interval([9.98, 9.98], [0.92, 0.92]) == {"difference": 9.06, "low": 9.06, "high": 9.06}
     assert difference_interval([9.98], [0.92, 0.96])["low"] is None
+
+
+def test_findings_are_judged_by_the_side_of_zero_their_interval_lies_on() -> None:
+    from rd_pipeline.sweeps.findings import Claim, judge
+
+    lower_error = Claim("SELECTIVE has a lower E_mpjpe than NONE", "E_mpjpe", "selective", "absolute", False)
+    seeds = {
+        "selective": [{"E_mpjpe": v} for v in (117.2, 137.5, 138.6)],
+        "absolute": [{"E_mpjpe": v} for v in (144.1, 138.0, 146.3)],
+        "all": [{"E_mpjpe": v} for v in (64.7, 75.5)],
+    }
+    assert judge(lower_error, seeds)["verdict"] == "undecided"
+    assert judge(lower_error, seeds)["difference"] == pytest.approx(11.7, abs=0.05)
+    all_lower = Claim("ALL has a lower E_mpjpe than SELECTIVE", "E_mpjpe", "all", "selective", False)
+    assert judge(all_lower, seeds)["verdict"] == "supported"
+    all_higher = Claim("ALL has a higher E_mpjpe than SELECTIVE", "E_mpjpe", "all", "selective", True)
+    assert judge(all_higher, seeds)["verdict"] == "contradicted"
+    seeds["all"] = seeds["all"][:1]
+    assert judge(all_lower, seeds)["verdict"] == "not judged (under 2 seeds)"
