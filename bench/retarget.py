@@ -32,9 +32,9 @@ from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.retarget.retarget import retarget
+from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.robots import load_robot
 from rd_pipeline.stages.import_motion import ImportParams
-from rd_pipeline.stages.retarget import RetargetParams
 
 TAKES = [
     "dance1_subject1",
@@ -126,9 +126,7 @@ def _retarget_and_score(robot_name: str, motion: str) -> dict:
     human = human_motion_from_bvh(read_bvh(paths.bvh_path(motion)), LAFAN_CM_TO_M, LAFAN_TO_Z_UP)
     robot = load_robot(robot_name)
     began = time.perf_counter()
-    result = retarget(
-        human, robot, params.fps, params.contact, params.shape, params.body_contact, params.weights, params.ik
-    )
+    result = retarget(human, robot, params)
     seconds = time.perf_counter() - began
     targets = result.targets
     ours = retarget_quality(

@@ -4,35 +4,11 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
 from typing import Any
 
 from rd_pipeline.artifacts.stage import Stage, StageContext
-from rd_pipeline.motion.contact import ContactThresholds
-from rd_pipeline.params import require_positive
-from rd_pipeline.retarget.settings import BodyContactSettings, IkSettings, IkWeights, TargetShaping
+from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.robots.assets import model_files
-
-
-@dataclass(frozen=True)
-class RetargetParams:
-    """Output rate and the settings of each retargeting step (`--set retarget.weights.feet_position=50`)."""
-
-    fps: float = 50.0
-    """Frame rate of the reference motion."""
-    contact: ContactThresholds = ContactThresholds()
-    """When a human foot counts as planted."""
-    shape: TargetShaping = TargetShaping()
-    """How the human motion becomes robot targets."""
-    body_contact: BodyContactSettings = BodyContactSettings()
-    """When knees, elbows, hands, pelvis and torso rest on the floor."""
-    weights: IkWeights = IkWeights()
-    """IK task costs."""
-    ik: IkSettings = IkSettings()
-    """IK iterations, limits and the sequence-level smoothing."""
-
-    def __post_init__(self) -> None:
-        require_positive(self, "fps")
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
@@ -57,12 +33,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     result = retarget(
         human,
         robot,
-        p.fps,
-        p.contact,
-        p.shape,
-        p.body_contact,
-        p.weights,
-        p.ik,
+        p,
         track=lambda frames, total: ctx.track(frames, total, f"IK {ctx.robot}"),
     )
     seconds = time.perf_counter() - began
@@ -79,6 +50,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         "duration_s": round(reference.duration_s, 4),
         "human_scale": round(targets.human_scale, 4),
         "ground_lift_max_mm": round(1000 * result.ground_lift_max_m, 2),
+        "repaired_windows": result.repaired_windows,
         "contact_fraction": [round(float(x), 4) for x in reference.foot_contact.mean(axis=0)],
         "body_contact_fraction": round(float(targets.body_contact.any(axis=1).mean()), 4),
     }
@@ -86,7 +58,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="retarget",
-    version=3,
+    version=4,
     description="human motion -> robot reference motion at 50 Hz (mink IK) + quality.json",
     params=RetargetParams,
     provides="reference",

@@ -17,8 +17,8 @@ from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.contact import contact_runs
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
+from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.robots import load_robot
-from rd_pipeline.stages.retarget import RetargetParams
 
 SPEC_QUALITY_KEYS = {
     "fps_frames_per_s",
@@ -42,8 +42,7 @@ def _human(motion: str, seconds: float | None = None) -> HumanMotion:
 
 
 def _retarget(robot: str, human: HumanMotion) -> RetargetResult:
-    p = RetargetParams()
-    return retarget(human, load_robot(robot), p.fps, p.contact, p.shape, p.body_contact, p.weights, p.ik)
+    return retarget(human, load_robot(robot), RetargetParams())
 
 
 @pytest.fixture(scope="module")
@@ -130,11 +129,8 @@ def test_retarget_map_with_an_unknown_human_joint() -> None:
         robot.config, retarget_map={**robot.config.retarget_map, "left_elbow_link": "LeftElbow"}
     )
     broken = dataclasses.replace(robot, config=config)
-    p = RetargetParams()
     with pytest.raises(PipelineError, match=r"bodies.retarget names human joint 'LeftElbow', not in the skeleton"):
-        retarget(
-            _human("dance1_subject2", seconds=1.0), broken, p.fps, p.contact, p.shape, p.body_contact, p.weights, p.ik
-        )
+        retarget(_human("dance1_subject2", seconds=1.0), broken, RetargetParams())
 
 
 @pytest.mark.slow
@@ -152,3 +148,17 @@ def test_stage_writes_reference_and_quality(artifacts: Path) -> None:
         )["key"]
     }
     assert manifest["metrics"]["skate_stance_mean_mm_s"] == quality["skate_stance_mean_mm_s"]
+
+
+def test_lagging_windows_are_padded_merged_and_off_at_zero_ratio() -> None:
+    from rd_pipeline.retarget.repair import RepairWindow, lagging_windows
+    from rd_pipeline.retarget.settings import LagRepair
+
+    errors = np.full(200, 0.05)
+    errors[[40, 41, 60, 150]] = 0.30  # 0.30 > max(2 x 0.05, 0.05 + 0.1)
+    errors[100] = 0.14  # under the margin: not lagging
+    repair = LagRepair(error_ratio=2.0, error_margin_m=0.1, padding_s=0.2, rejoin_s=0.1)
+    assert lagging_windows(errors, 50.0, repair) == [RepairWindow(30, 70, 75), RepairWindow(140, 160, 165)]
+    errors[199] = 0.30
+    assert lagging_windows(errors, 50.0, repair)[-1] == RepairWindow(189, 199, 199)
+    assert lagging_windows(errors, 50.0, dataclasses.replace(repair, error_ratio=0.0)) == []

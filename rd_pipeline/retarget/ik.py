@@ -231,24 +231,56 @@ class RetargetIk:
         previous = None
         recent: deque[float] = deque(maxlen=max(1, int(round(self.settings.catch_up_window_s * targets.fps))))
         for t in frames:
-            self._set_frame_targets(t)
-            # The first frame places the robot from its default pose: the root may go anywhere.
-            self.step_limit.start_frame(previous, self.root_steps[t] if previous is not None else np.full(6, np.inf))
-            # The first frame starts from the default pose, so it gets more iterations to converge.
-            for _ in range(self.settings.iterations if previous is not None else 50):
-                self._iterate(self.tasks)
-            # A frame that fell far behind its targets (a fall, a fast turn) is solved further, within
-            # the same per-frame bounds, instead of carrying the lag into the next frames.
-            # The recent median does not change within a frame.
-            lag_limit = float(np.median(recent)) + self.settings.catch_up_margin_m if recent else np.inf
-            extra = 0
-            while extra < self.settings.catch_up_iterations and self._keypoint_error(t) > lag_limit:
-                self._iterate(self.tasks)
-                extra += 1
+            if previous is None:
+                out[t] = self._solve_first_frame(t)
+            else:
+                # The recent median does not change within a frame.
+                lag_limit = float(np.median(recent)) + self.settings.catch_up_margin_m if recent else np.inf
+                out[t] = self.solve_frame(t, previous, self.root_steps[t], lag_limit)
             recent.append(self._keypoint_error(t))
-            out[t] = self._clipped(self.configuration.q)
             previous = out[t]
         return out
+
+    def _solve_first_frame(self, t: int) -> np.ndarray:
+        """The first frame places the robot from its default pose: the root may go anywhere, and it
+        gets more iterations to converge."""
+        self._set_frame_targets(t)
+        self.step_limit.start_frame(None, np.full(6, np.inf))
+        for _ in range(self.settings.first_frame_iterations):
+            self._iterate(self.tasks)
+        return self._clipped(self.configuration.q)
+
+    def solve_frame(
+        self,
+        t: int,
+        previous: np.ndarray,
+        root_max_step: np.ndarray,
+        lag_limit: float,
+        extra_tasks: tuple = (),
+    ) -> np.ndarray:
+        """Frame `t` warm started from the current configuration, within one frame's step of `previous`.
+
+        A frame whose keypoint error stays above `lag_limit` (a fall, a fast turn) is solved further,
+        within the same per-frame bounds, instead of carrying the lag into the next frames.
+        """
+        tasks = [*self.tasks, *extra_tasks]
+        self._set_frame_targets(t)
+        self.step_limit.start_frame(previous, root_max_step)
+        for _ in range(self.settings.iterations):
+            self._iterate(tasks)
+        extra = 0
+        while extra < self.settings.catch_up_iterations and self._keypoint_error(t) > lag_limit:
+            self._iterate(tasks)
+            extra += 1
+        return self._clipped(self.configuration.q)
+
+    def keypoint_errors(self, qpos: np.ndarray, first: int = 0) -> np.ndarray:
+        """Mean distance of the key bodies to their targets, per row of `qpos` (frames from `first` on)."""
+        errors = np.empty(len(qpos))
+        for k, q in enumerate(qpos):
+            self.configuration.update(q)
+            errors[k] = self._keypoint_error(first + k)
+        return errors
 
 
 def _root_step_budget(targets: RetargetTargets, root_body: str, settings: IkSettings) -> np.ndarray:

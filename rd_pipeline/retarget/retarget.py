@@ -10,11 +10,11 @@ from scipy.ndimage import gaussian_filter1d
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.retarget_quality import FootMeshes, colliding_frames
-from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
 from rd_pipeline.retarget.ik import RetargetIk
-from rd_pipeline.retarget.settings import BodyContactSettings, IkSettings, IkWeights, TargetShaping
+from rd_pipeline.retarget.repair import repair_lag
+from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.retarget.smoothing import smooth_cover
 from rd_pipeline.retarget.targets import RetargetTargets, build_targets
 from rd_pipeline.robots import Robot
@@ -31,34 +31,35 @@ class RetargetResult:
     """Scaled-human keypoint targets (for the keypoint error and for viewing)."""
     ground_lift_max_m: float
     """Largest lift the ground pass had to apply."""
+    repaired_windows: int
+    """Lagging stretches the lag repair re-solved."""
 
 
 def retarget(
     human: HumanMotion,
     robot: Robot,
-    fps: float,
-    contact: ContactThresholds,
-    shape: TargetShaping,
-    body_contact: BodyContactSettings,
-    weights: IkWeights,
-    settings: IkSettings,
+    params: RetargetParams,
     track: Callable[[Iterable[int], int], Iterable[int]] = lambda frames, total: frames,
 ) -> RetargetResult:
-    """Retarget `human` onto `robot` at `fps`; `track` wraps the frame loops (progress bars).
+    """Retarget `human` onto `robot` with `params`; `track` wraps the frame loops (progress bars).
 
-    Per-frame IK against the targets, then a sequence-level pass: the whole trajectory is smoothed
-    and the feet are put back on their targets by a leg-only IK that stays near the smoothed pose.
+    Per-frame IK against the targets; stretches that fell far behind them solved again from both
+    ends; then a sequence-level pass: the whole trajectory is smoothed and the feet are put back on
+    their targets by a leg-only IK that stays near the smoothed pose.
     """
     if not np.all(np.isfinite(human.pos_w)):
         frame = int(np.argwhere(~np.isfinite(human.pos_w))[0, 0])
         raise PipelineError(f"human motion has a non-finite position at frame {frame}")
+    fps = params.fps
+    settings = params.ik
     if human.duration_s < 1.0 / fps:
         raise PipelineError(f"clip of {human.duration_s:.4f} s is shorter than one frame period (1/{fps:g} s)")
     feet = FootMeshes.from_robot(robot)
-    targets = build_targets(human, robot, fps, feet.vertices, contact, shape, body_contact)
+    targets = build_targets(human, robot, fps, feet.vertices, params.contact, params.shape, params.body_contact)
     hulls = BodyHulls.from_robot(robot)
-    ik = RetargetIk(robot, targets, weights, settings, hulls)
+    ik = RetargetIk(robot, targets, params.weights, settings, hulls)
     qpos = ik.solve(track(range(targets.n_frames), targets.n_frames))
+    qpos, repaired = repair_lag(ik, qpos, params.repair)
     if settings.trajectory_smoothing_s > 0:
         smoothed = _smooth_trajectory(robot, qpos, settings.trajectory_smoothing_s * fps)
         # Smoothing knows nothing of self-collision: where it brings a pair closer than the margin
@@ -75,7 +76,12 @@ def retarget(
     if lift.any():
         qpos[:, 2] += lift
         reference = _reference(robot, qpos, targets)
-    return RetargetResult(reference=reference, targets=targets, ground_lift_max_m=float(lift.max()))
+    return RetargetResult(
+        reference=reference,
+        targets=targets,
+        ground_lift_max_m=float(lift.max()),
+        repaired_windows=repaired,
+    )
 
 
 def _smooth_trajectory(robot: Robot, qpos: np.ndarray, sigma: float) -> np.ndarray:

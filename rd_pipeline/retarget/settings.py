@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from rd_pipeline.motion.contact import ContactThresholds
+from rd_pipeline.params import require_positive
 
 
 @dataclass(frozen=True)
@@ -101,6 +102,8 @@ class IkSettings:
 
     iterations: int = 2
     """Solver iterations per frame (warm started from the previous frame)."""
+    first_frame_iterations: int = 50
+    """Solver iterations of the first frame, which starts from the default pose."""
     solver: str = "daqp"
     """QP solver name (qpsolvers)."""
     velocity_margin: float = 0.95
@@ -145,3 +148,49 @@ class IkSettings:
     """How strongly the refinement holds joints at their smoothed values."""
     lm_damping: float = 1.0
     """Error-scaled damping of the frame tasks: keeps the solve calm near singular arms and legs."""
+
+
+@dataclass(frozen=True)
+class LagRepair:
+    """When and how a stretch of frames that fell far behind its targets is solved again.
+
+    A forward solve can stay on a branch the human has left (bent over while the human already
+    sits); solved backward from where it has caught up again, the same stretch often is not. The
+    stretch is solved forward once more, guided towards whichever solution is closer to the targets
+    frame by frame, within the same per-frame limits, and kept only if it lags less.
+    """
+
+    error_ratio: float = 2.0
+    """A frame lags when its keypoint error is this many times the take's median ..."""
+    error_margin_m: float = 0.1
+    """... and at least this much above it (0 ratio: no repair)."""
+    padding_s: float = 1.0
+    """Seconds re-solved before and after a lagging stretch (overlapping windows merge)."""
+    guide_cost: float = 1.0
+    """Posture cost pulling the re-solve towards the frame's better solution."""
+    rejoin_s: float = 0.5
+    """After the stretch, seconds over which the re-solve is guided back to and cross-faded into the
+    first solution, so the splice is continuous."""
+
+
+@dataclass(frozen=True)
+class RetargetParams:
+    """Output rate and the settings of each retargeting step (`--set retarget.weights.feet_position=50`)."""
+
+    fps: float = 50.0
+    """Frame rate of the reference motion."""
+    contact: ContactThresholds = ContactThresholds()
+    """When a human foot counts as planted."""
+    shape: TargetShaping = TargetShaping()
+    """How the human motion becomes robot targets."""
+    body_contact: BodyContactSettings = BodyContactSettings()
+    """When knees, elbows, hands, pelvis and torso rest on the floor."""
+    weights: IkWeights = IkWeights()
+    """IK task costs."""
+    ik: IkSettings = IkSettings()
+    """IK iterations, limits and the sequence-level smoothing."""
+    repair: LagRepair = LagRepair()
+    """When stretches that fell far behind their targets are solved again."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "fps")

@@ -1,0 +1,114 @@
+"""Lag repair: stretches the forward solve left far behind their targets, solved again from both ends."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mink
+import numpy as np
+
+from rd_pipeline.retarget.ik import RetargetIk
+from rd_pipeline.retarget.settings import LagRepair
+
+
+@dataclass(frozen=True)
+class RepairWindow:
+    """One re-solved stretch of frames."""
+
+    first: int
+    """The last frame kept from the forward solve; the re-solve starts after it."""
+    lagging_end: int
+    """The last frame of the padded lagging stretch."""
+    last: int
+    """The last frame the re-solve fades into the forward solve."""
+
+
+def lagging_windows(errors: np.ndarray, fps: float, repair: LagRepair) -> list[RepairWindow]:
+    """Padded stretches of frames whose keypoint error is far above the take's median."""
+    if repair.error_ratio <= 0:
+        return []
+    median = float(np.median(errors))
+    lagging = errors > max(repair.error_ratio * median, median + repair.error_margin_m)
+    padding = int(round(repair.padding_s * fps))
+    rejoin = int(round(repair.rejoin_s * fps))
+    last_frame = len(errors) - 1
+    spans: list[list[int]] = []
+    for t in np.flatnonzero(lagging):
+        start = max(int(t) - padding, 0)
+        end = min(int(t) + padding, last_frame)
+        if spans and start <= spans[-1][1]:
+            spans[-1][1] = end
+        else:
+            spans.append([start, end])
+    return [RepairWindow(start, end, min(end + rejoin, last_frame)) for start, end in spans if end > start]
+
+
+def repair_lag(ik: RetargetIk, qpos: np.ndarray, repair: LagRepair) -> tuple[np.ndarray, int]:
+    """`qpos` with its lagging stretches re-solved where that lowers their error, and how many were."""
+    errors = ik.keypoint_errors(qpos)
+    lag_limit = float(np.median(errors)) + ik.settings.catch_up_margin_m
+    out = qpos.copy()
+    repaired = 0
+    for window in lagging_windows(errors, ik.targets.fps, repair):
+        candidate = _resolve(ik, out, errors, window, lag_limit, repair)
+        span = slice(window.first + 1, window.last + 1)
+        candidate_errors = ik.keypoint_errors(candidate, window.first + 1)
+        if candidate_errors.max() < errors[span].max() and candidate_errors.mean() <= errors[span].mean():
+            out[span] = candidate
+            errors[span] = candidate_errors
+            repaired += 1
+    return out, repaired
+
+
+def _resolve(
+    ik: RetargetIk,
+    qpos: np.ndarray,
+    errors: np.ndarray,
+    window: RepairWindow,
+    lag_limit: float,
+    repair: LagRepair,
+) -> np.ndarray:
+    """Frames `first + 1 .. last` solved forward again, guided per frame by the better of the
+    forward and a backward solve, then cross-faded into the forward solve after `lagging_end`."""
+    first = window.first
+    end = window.lagging_end
+    backward = _solve_backward(ik, qpos[end], range(end - 1, first, -1), lag_limit)
+    backward_errors = ik.keypoint_errors(backward, first + 1)
+    guide = qpos[first + 1 : window.last + 1].copy()
+    better = backward_errors < errors[first + 1 : end]
+    guide[: end - first - 1][better] = backward[better]
+    guide_task = mink.PostureTask(ik.robot.model, cost=repair.guide_cost)
+    resolved = np.empty_like(guide)
+    previous = qpos[first]
+    ik.configuration.update(previous)
+    for k, t in enumerate(range(first + 1, window.last + 1)):
+        guide_task.set_target(guide[k])
+        resolved[k] = ik.solve_frame(t, previous, ik.root_steps[t], lag_limit, (guide_task,))
+        previous = resolved[k]
+    fade = np.ones(len(resolved))
+    tail = window.last - end
+    if tail > 0:
+        fade[end - first :] = np.arange(tail, 0, -1) / (tail + 1)
+    return _blend(qpos[first + 1 : window.last + 1], resolved, fade)
+
+
+def _solve_backward(ik: RetargetIk, start: np.ndarray, frames: range, lag_limit: float) -> np.ndarray:
+    """Frames in reverse order from `start`, returned in forward order (one row per frame)."""
+    out = np.empty((len(frames), len(start)))
+    previous = start
+    ik.configuration.update(start)
+    for k, t in enumerate(frames):
+        # Going back in time, frame t is reached from t + 1: that step's root budget applies.
+        out[k] = ik.solve_frame(t, previous, ik.root_steps[t + 1], lag_limit)
+        previous = out[k]
+    return out[::-1]
+
+
+def _blend(base: np.ndarray, other: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Per frame, `weight` of `other` and the rest of `base` (root quaternions normalized lerp)."""
+    w = weight[:, None]
+    quat_other = other[:, 3:7] * np.sign(np.sum(other[:, 3:7] * base[:, 3:7], axis=1, keepdims=True))
+    out = (1.0 - w) * base + w * other
+    quat = (1.0 - w) * base[:, 3:7] + w * quat_other
+    out[:, 3:7] = quat / np.linalg.norm(quat, axis=1, keepdims=True)
+    return out
