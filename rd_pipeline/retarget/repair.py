@@ -9,6 +9,7 @@ import numpy as np
 
 from rd_pipeline.retarget.ik import RetargetIk
 from rd_pipeline.retarget.settings import LagRepair
+from rd_pipeline.retarget.smoothing import blend_configurations
 
 
 @dataclass(frozen=True)
@@ -89,7 +90,7 @@ def _resolve(
     tail = window.last - end
     if tail > 0:
         fade[end - first :] = np.arange(tail, 0, -1) / (tail + 1)
-    return _blend(qpos[first + 1 : window.last + 1], resolved, fade)
+    return blend_configurations(qpos[first + 1 : window.last + 1], resolved, fade)
 
 
 def _solve_backward(ik: RetargetIk, start: np.ndarray, frames: range, lag_limit: float) -> np.ndarray:
@@ -102,13 +103,3 @@ def _solve_backward(ik: RetargetIk, start: np.ndarray, frames: range, lag_limit:
         out[k] = ik.solve_frame(t, previous, ik.root_steps[t + 1], lag_limit)
         previous = out[k]
     return out[::-1]
-
-
-def _blend(base: np.ndarray, other: np.ndarray, weight: np.ndarray) -> np.ndarray:
-    """Per frame, `weight` of `other` and the rest of `base` (root quaternions normalized lerp)."""
-    w = weight[:, None]
-    quat_other = other[:, 3:7] * np.sign(np.sum(other[:, 3:7] * base[:, 3:7], axis=1, keepdims=True))
-    out = (1.0 - w) * base + w * other
-    quat = (1.0 - w) * base[:, 3:7] + w * quat_other
-    out[:, 3:7] = quat / np.linalg.norm(quat, axis=1, keepdims=True)
-    return out

@@ -15,7 +15,7 @@ from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_t
 from rd_pipeline.retarget.ik import RetargetIk
 from rd_pipeline.retarget.repair import repair_lag
 from rd_pipeline.retarget.settings import RetargetParams
-from rd_pipeline.retarget.smoothing import smooth_cover
+from rd_pipeline.retarget.smoothing import blend_configurations, smooth_cover
 from rd_pipeline.retarget.targets import RetargetTargets, build_targets
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.hulls import BodyHulls
@@ -65,9 +65,8 @@ def retarget(
         # Smoothing knows nothing of self-collision: where it brings a pair closer than the margin
         # the IK kept, ease back to the IK solution for those frames.
         close = colliding_frames(robot, smoothed, -0.5 * settings.collision_margin_m)
-        keep_ik = np.minimum(smooth_cover(close.astype(float), fps, 0.05), 1.0)[:, None]
-        qpos = keep_ik * qpos + (1.0 - keep_ik) * smoothed
-        qpos[:, 3:7] /= np.linalg.norm(qpos[:, 3:7], axis=1, keepdims=True)
+        keep_ik = np.minimum(smooth_cover(close.astype(float), fps, 0.05), 1.0)
+        qpos = blend_configurations(smoothed, qpos, keep_ik)
         qpos = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames))
     reference = _reference(robot, qpos, targets)
     # The IK keeps every body above the floor; smoothing can still dip a body by a few millimetres.

@@ -1,4 +1,4 @@
-"""Smooth corrections that never fall short of what a frame needs."""
+"""Smooth corrections that never fall short of what a frame needs, and blends of two trajectories."""
 
 from __future__ import annotations
 
@@ -23,3 +23,15 @@ def smoothstep(s: np.ndarray) -> np.ndarray:
     """Quintic ease on [0, 1] (zero velocity and acceleration at both ends), so blends add little jerk."""
     s = np.clip(s, 0.0, 1.0)
     return s * s * s * (s * (6.0 * s - 15.0) + 10.0)
+
+
+def blend_configurations(base: np.ndarray, other: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Per frame, `weight` (T,) of `other` and the rest of `base`, both (T, nq) free-base configurations;
+    the root quaternions are blended in the same hemisphere and normalized."""
+    w = weight[:, None]
+    same_side = np.sum(other[:, 3:7] * base[:, 3:7], axis=1, keepdims=True) >= 0.0
+    quat_other = np.where(same_side, other[:, 3:7], -other[:, 3:7])
+    out = (1.0 - w) * base + w * other
+    quat = (1.0 - w) * base[:, 3:7] + w * quat_other
+    out[:, 3:7] = quat / np.linalg.norm(quat, axis=1, keepdims=True)
+    return out
