@@ -162,3 +162,26 @@ def test_lagging_windows_are_padded_merged_and_off_at_zero_ratio() -> None:
     errors[199] = 0.30
     assert lagging_windows(errors, 50.0, repair)[-1] == RepairWindow(189, 199, 199)
     assert lagging_windows(errors, 50.0, dataclasses.replace(repair, error_ratio=0.0)) == []
+
+
+def test_frames_visited_backward_get_their_own_task_costs() -> None:
+    # The lag repair solves stretches backward: each frame must hold its own costs (planted or
+    # swinging feet), not those of the frame visited before it.
+    from rd_pipeline.evaluation.retarget_quality import FootMeshes
+    from rd_pipeline.retarget.ik import RetargetIk
+    from rd_pipeline.retarget.targets import build_targets
+    from rd_pipeline.robots.hulls import BodyHulls
+
+    robot = load_robot("g1")
+    params = RetargetParams()
+    feet = FootMeshes.from_robot(robot)
+    human = _human("dance1_subject2", seconds=8.0)
+    targets = build_targets(human, robot, params.fps, feet.vertices, params.contact, params.shape, params.body_contact)
+    ik = RetargetIk(robot, targets, params.weights, params.ik, BodyHulls.from_robot(robot))
+    changes = np.flatnonzero(np.any(ik.position_costs[1:] != ik.position_costs[:-1], axis=(1, 2)))
+    assert len(changes) >= 2, "the excerpt should switch feet between planted and swinging"
+    q = ik.initial_configuration()
+    for t in reversed(range(targets.n_frames)):
+        q = ik.solve_frame(t, q, ik.root_steps[t], np.inf)
+        held = np.array([task.cost[:3] for task in ik.frame_tasks])
+        np.testing.assert_array_equal(held, ik.position_costs[t])

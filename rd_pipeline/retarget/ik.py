@@ -59,6 +59,7 @@ class RetargetIk:
                 )
             )
         self.position_costs = _position_cost_schedule(targets, config, weights)
+        self.applied_costs: np.ndarray | None = None
         self.posture = mink.PostureTask(model, cost=weights.posture)
         q_default = self.configuration.q.copy()
         q_default[robot.qpos_indices] = config.default_pos
@@ -119,10 +120,13 @@ class RetargetIk:
     def _set_frame_targets(self, t: int) -> None:
         targets = self.targets
         self.floor.raise_bodies(self.floor_raise[t])
-        costs = self.position_costs
-        if t == 0 or np.any(costs[t] != costs[t - 1]):
-            for task, cost in zip(self.frame_tasks, costs[t]):
+        # Frames are visited in any order (the lag repair solves backward), so the costs to compare
+        # with are the ones the tasks hold, not the previous frame's.
+        frame_costs = self.position_costs[t]
+        if self.applied_costs is None or np.any(frame_costs != self.applied_costs):
+            for task, cost in zip(self.frame_tasks, frame_costs):
                 task.set_position_cost(cost)
+            self.applied_costs = frame_costs
         for task, body in zip(self.frame_tasks, targets.bodies):
             rotation = targets.orientations.get(body)
             so3 = mink.SO3.from_matrix(rotation[t]) if rotation is not None else mink.SO3.identity()
