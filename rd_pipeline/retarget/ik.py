@@ -135,7 +135,7 @@ class RetargetIk:
             )
 
     def refine_feet(self, smoothed: np.ndarray, frames: Iterable[int]) -> np.ndarray:
-        """Put the feet of a smoothed trajectory back on their targets, moving the legs only.
+        """Put the feet of a smoothed trajectory back on their targets, moving the joints only (base fixed).
 
         Each frame starts from the smoothed pose, with the base fixed and a posture task holding
         every joint near its smoothed value, so the smoothness survives where the feet need no help.
@@ -289,8 +289,8 @@ class RetargetIk:
 
 def _root_step_budget(targets: RetargetTargets, root_body: str, settings: IkSettings) -> np.ndarray:
     """(T, 6) how far the floating base may move in each frame, per tangent axis (world linear,
-    body angular): a multiple of its own target's fastest motion nearby plus a floor, so the root
-    can catch up in a fast transition but never runs faster than the human it follows."""
+    body angular): a multiple of its own target's fastest motion nearby plus a minimum, so the root
+    can catch up in a fast transition but cannot run off far faster than the human it follows."""
     period = 1.0 / targets.fps
     window = 2 * int(round(settings.root_speed_window_s * targets.fps)) + 1
     position = targets.positions[:, targets.bodies.index(root_body)]

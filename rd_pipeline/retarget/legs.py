@@ -31,6 +31,8 @@ def keep_feet_apart(
     pelvis: np.ndarray,
     fps: float,
     fraction: float,
+    smoothing_s: float,
+    line_smoothing_s: float,
 ) -> None:
     """Push the legs apart where the feet come horizontally closer than `fraction` of the robot's rest
     stance: a human crosses and passes legs closer than a robot's thick knees and feet can.
@@ -43,10 +45,10 @@ def keep_feet_apart(
     distance = np.linalg.norm(between, axis=1)
     # Feet exactly on top of each other have no line between them: use the pelvis' left.
     direction = np.where(distance[:, None] > 1e-6, between / np.maximum(distance, 1e-6)[:, None], pelvis[:, :2, 1])
-    direction = gaussian_filter1d(direction, 0.05 * fps, axis=0, mode="nearest")
+    direction = gaussian_filter1d(direction, line_smoothing_s * fps, axis=0, mode="nearest")
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
     rest_distance = float(np.linalg.norm((rest[FEET[0]] - rest[FEET[1]])[:2]))
-    push = smooth_cover(np.maximum(fraction * rest_distance - distance, 0.0), fps, 0.1)
+    push = smooth_cover(np.maximum(fraction * rest_distance - distance, 0.0), fps, smoothing_s)
     for knee, foot, sign in (("LeftLeg", FEET[0], 0.5), ("RightLeg", FEET[1], -0.5)):
         shift = np.zeros_like(targets[foot])
         shift[:, :2] = sign * push[:, None] * direction
@@ -59,6 +61,7 @@ def keep_legs_reachable(
     rest: dict[str, np.ndarray],
     fps: float,
     fraction: float,
+    smoothing_s: float,
 ) -> None:
     """Lower the body (not the feet) where a planted foot would need a leg longer than the robot's.
 
@@ -74,7 +77,7 @@ def keep_legs_reachable(
         reachable = horizontal < reach
         height = np.sqrt(reach**2 - np.minimum(horizontal, reach) ** 2)
         need = np.maximum(need, np.where(reachable, delta[:, 2] - height, 0.0))
-    drop = smooth_cover(np.maximum(need, 0.0), fps, 0.1)
+    drop = smooth_cover(np.maximum(need, 0.0), fps, smoothing_s)
     for joint in targets:
         # A knee sits between a lowered hip and a foot that stays: it comes down about half as far.
         share = 0.0 if joint in FEET else 0.5 if joint in KNEES else 1.0

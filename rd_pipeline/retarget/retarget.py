@@ -62,16 +62,18 @@ def retarget(
     qpos, repaired = repair_lag(ik, qpos, params.repair)
     if settings.trajectory_smoothing_s > 0:
         smoothed = _smooth_trajectory(robot, qpos, settings.trajectory_smoothing_s * fps)
-        # Smoothing knows nothing of self-collision: where it brings a pair closer than the margin
+        # Smoothing knows nothing of self-collision: where it brings a pair well inside the margin
         # the IK kept, ease back to the IK solution for those frames.
-        close = colliding_frames(robot, smoothed, -0.5 * settings.collision_margin_m)
-        keep_ik = np.minimum(smooth_cover(close.astype(float), fps, 0.05), 1.0)
+        clearance = settings.smoothed_pair_fraction * settings.collision_margin_m
+        close = colliding_frames(robot, smoothed, -clearance)
+        keep_ik = np.minimum(smooth_cover(close.astype(float), fps, settings.ik_blend_s), 1.0)
         qpos = blend_configurations(smoothed, qpos, keep_ik)
         qpos = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames))
     reference = _reference(robot, qpos, targets)
     # The IK keeps every body above the floor; smoothing can still dip a body by a few millimetres.
     lowest = hulls.lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
-    lift = smooth_cover(np.maximum(-lowest.min(axis=1), 0.0), fps, 0.05)
+    sink = np.maximum(-lowest.min(axis=1), 0.0)
+    lift = smooth_cover(sink, fps, settings.ground_lift_smoothing_s)
     if lift.any():
         qpos[:, 2] += lift
         reference = _reference(robot, qpos, targets)

@@ -34,6 +34,10 @@ class TargetShaping:
     """Fraction of the straight-leg length a planted leg may use; beyond it the body is lowered."""
     min_stance_fraction: float = 0.6
     """Feet never come sideways closer than this fraction of the robot's rest stance (crossed legs are opened)."""
+    leg_correction_smoothing_s: float = 0.1
+    """Gaussian sigma (s) of the body lowering and the leg spreading above, so they add no jerk."""
+    feet_line_smoothing_s: float = 0.05
+    """Gaussian sigma (s) on the direction between the feet that the spreading pushes along."""
     planted_tilt_rad: float = 0.35
     """A planted human foot tilted more than this (kneeling, heel up) takes on the human's tilt, fully at twice it."""
     plant_drift: PlantDrift = PlantDrift()
@@ -142,6 +146,12 @@ class IkSettings:
     """Bodies closer to the floor than this (beyond the clearance) enter the QP."""
     trajectory_smoothing_s: float = 0.04
     """Gaussian sigma (s) of the sequence-level smoothing of the solved trajectory (0: none)."""
+    smoothed_pair_fraction: float = 0.5
+    """Where the smoothing brings a collision pair within this fraction of `collision_margin_m` ..."""
+    ik_blend_s: float = 0.05
+    """... the trajectory eases back to the IK solution, over a Gaussian of this sigma (s)."""
+    ground_lift_smoothing_s: float = 0.05
+    """Gaussian sigma (s) of the final lift that raises bodies the smoothing dipped below the floor."""
     refine_iterations: int = 1
     """Iterations per frame of the feet refinement after smoothing."""
     refine_posture_cost: float = 5.0
@@ -161,9 +171,9 @@ class LagRepair:
     """
 
     error_ratio: float = 2.0
-    """A frame lags when its keypoint error is this many times the take's median ..."""
+    """A frame lags when its keypoint error is this many times the take's median (0: no repair) ..."""
     error_margin_m: float = 0.1
-    """... and at least this much above it (0 ratio: no repair)."""
+    """... and at least this much above it."""
     padding_s: float = 1.0
     """Seconds re-solved before and after a lagging stretch (overlapping windows merge)."""
     guide_cost: float = 1.0

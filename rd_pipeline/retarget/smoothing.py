@@ -7,7 +7,7 @@ from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
 
 def smooth_cover(need: np.ndarray, fps: float, sigma_s: float) -> np.ndarray:
-    """A smooth curve >= `need` everywhere: a max filter three sigmas wide, a Gaussian blur, then a max.
+    """A smooth curve >= `need` everywhere: a max filter three sigmas either side, a Gaussian blur, then a max.
 
     Used for vertical corrections (lowering the body so legs reach, lifting it so feet stay above
     ground) that must hold at every frame without adding jerk.

@@ -157,7 +157,15 @@ def build_targets(
             targets[joint] = targets[parent] + scale * segment
 
     match_stance_width(targets, rest, rigid_frame[PELVIS])
-    keep_feet_apart(targets, rest, rigid_frame[PELVIS], fps, shape.min_stance_fraction)
+    keep_feet_apart(
+        targets,
+        rest,
+        rigid_frame[PELVIS],
+        fps,
+        shape.min_stance_fraction,
+        shape.leg_correction_smoothing_s,
+        shape.feet_line_smoothing_s,
+    )
     contact = _human_contacts(human_pos, index, fps, contact)
     # Lift or lower everything so planted feet sit at the robot's sole height (robot and human
     # ankles are not at the same height in proportion to the legs).
@@ -190,7 +198,7 @@ def build_targets(
         offset = robot_rest_rotation(robot, body_for[foot])
         orientations[body_for[foot]] = rotation @ offset
 
-    keep_legs_reachable(targets, rest, fps, shape.reach_fraction)
+    keep_legs_reachable(targets, rest, fps, shape.reach_fraction, shape.leg_correction_smoothing_s)
     resting = label_body_contacts(human_pos, index, joints, fps, body_contact)
     for k, joint in enumerate(joints):
         if resting[:, k].any():
