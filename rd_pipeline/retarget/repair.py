@@ -16,11 +16,11 @@ from rd_pipeline.retarget.smoothing import blend_configurations
 class RepairWindow:
     """One re-solved stretch of frames."""
 
-    first: int
+    anchor: int
     """The last frame kept from the forward solve; the re-solve starts after it."""
-    lagging_end: int
-    """The last frame of the padded lagging stretch."""
-    last: int
+    backward_start: int
+    """The last frame of the padded lagging stretch, where the backward solve starts."""
+    rejoin_end: int
     """The last frame the re-solve fades into the forward solve."""
 
 
@@ -29,7 +29,8 @@ def lagging_windows(errors: np.ndarray, fps: float, repair: LagRepair) -> list[R
     if repair.error_ratio <= 0:
         return []
     median = float(np.median(errors))
-    lagging = errors > max(repair.error_ratio * median, median + repair.error_margin_m)
+    threshold = max(repair.error_ratio * median, median + repair.error_margin_m)
+    lagging = errors > threshold
     padding = int(round(repair.padding_s * fps))
     rejoin = int(round(repair.rejoin_s * fps))
     last_frame = len(errors) - 1
@@ -41,7 +42,11 @@ def lagging_windows(errors: np.ndarray, fps: float, repair: LagRepair) -> list[R
             spans[-1][1] = end
         else:
             spans.append([start, end])
-    return [RepairWindow(start, end, min(end + rejoin, last_frame)) for start, end in spans if end > start]
+    windows = []
+    for start, end in spans:
+        if end > start:
+            windows.append(RepairWindow(start, end, min(end + rejoin, last_frame)))
+    return windows
 
 
 def repair_lag(ik: RetargetIk, qpos: np.ndarray, repair: LagRepair) -> tuple[np.ndarray, int]:
@@ -51,17 +56,19 @@ def repair_lag(ik: RetargetIk, qpos: np.ndarray, repair: LagRepair) -> tuple[np.
     out = qpos.copy()
     repaired = 0
     for window in lagging_windows(errors, ik.targets.fps, repair):
-        candidate = _resolve(ik, out, errors, window, lag_limit, repair)
-        span = slice(window.first + 1, window.last + 1)
-        candidate_errors = ik.keypoint_errors(candidate, window.first + 1)
-        if candidate_errors.max() < errors[span].max() and candidate_errors.mean() <= errors[span].mean():
+        candidate = _solve_window_again(ik, out, errors, window, lag_limit, repair)
+        span = slice(window.anchor + 1, window.rejoin_end + 1)
+        candidate_errors = ik.keypoint_errors(candidate, window.anchor + 1)
+        lowers_peak = candidate_errors.max() < errors[span].max()
+        lowers_mean = candidate_errors.mean() <= errors[span].mean()
+        if lowers_peak and lowers_mean:
             out[span] = candidate
             errors[span] = candidate_errors
             repaired += 1
     return out, repaired
 
 
-def _resolve(
+def _solve_window_again(
     ik: RetargetIk,
     qpos: np.ndarray,
     errors: np.ndarray,
@@ -69,28 +76,31 @@ def _resolve(
     lag_limit: float,
     repair: LagRepair,
 ) -> np.ndarray:
-    """Frames `first + 1 .. last` solved forward again, guided per frame by the better of the
-    forward and a backward solve, then cross-faded into the forward solve after `lagging_end`."""
-    first = window.first
-    end = window.lagging_end
+    """Frames after `anchor` up to `rejoin_end` solved forward again, guided per frame by the better
+    of the forward and a backward solve, then cross-faded into the forward solve after
+    `backward_start`."""
+    first = window.anchor
+    end = window.backward_start
+    last = window.rejoin_end
     backward = _solve_backward(ik, qpos[end], range(end - 1, first, -1), lag_limit)
     backward_errors = ik.keypoint_errors(backward, first + 1)
-    guide = qpos[first + 1 : window.last + 1].copy()
+    guide = qpos[first + 1 : last + 1].copy()
     better = backward_errors < errors[first + 1 : end]
-    guide[: end - first - 1][better] = backward[better]
+    n_backward = end - first - 1
+    guide[:n_backward] = np.where(better[:, None], backward, guide[:n_backward])
     guide_task = mink.PostureTask(ik.robot.model, cost=repair.guide_cost)
     resolved = np.empty_like(guide)
     previous = qpos[first]
     ik.configuration.update(previous)
-    for k, t in enumerate(range(first + 1, window.last + 1)):
+    for k, t in enumerate(range(first + 1, last + 1)):
         guide_task.set_target(guide[k])
         resolved[k] = ik.solve_frame(t, previous, ik.root_steps[t], lag_limit, (guide_task,))
         previous = resolved[k]
     fade = np.ones(len(resolved))
-    tail = window.last - end
+    tail = last - end
     if tail > 0:
         fade[end - first :] = np.arange(tail, 0, -1) / (tail + 1)
-    return blend_configurations(qpos[first + 1 : window.last + 1], resolved, fade)
+    return blend_configurations(qpos[first + 1 : last + 1], resolved, fade)
 
 
 def _solve_backward(ik: RetargetIk, start: np.ndarray, frames: range, lag_limit: float) -> np.ndarray:
