@@ -102,8 +102,7 @@ class RetargetIk:
 
     def initial_configuration(self) -> np.ndarray:
         """Default pose placed at the first frame's pelvis target."""
-        q = self.configuration.q.copy()
-        q[:] = 0.0
+        q = np.zeros(self.robot.model.nq)
         q[3] = 1.0
         q[self.robot.qpos_indices] = self.robot.config.default_pos
         root = self.targets.bodies.index(self.robot.config.root_body)
@@ -127,12 +126,13 @@ class RetargetIk:
             for task, cost in zip(self.frame_tasks, frame_costs):
                 task.set_position_cost(cost)
             self.applied_costs = frame_costs
-        for task, body in zip(self.frame_tasks, targets.bodies):
-            rotation = targets.orientations.get(body)
-            so3 = mink.SO3.from_matrix(rotation[t]) if rotation is not None else mink.SO3.identity()
-            task.set_target(
-                mink.SE3.from_rotation_and_translation(so3, targets.positions[t, targets.bodies.index(body)])
-            )
+        for k, task in enumerate(self.frame_tasks):
+            rotation = targets.orientations.get(targets.bodies[k])
+            so3 = mink.SO3.identity()
+            if rotation is not None:
+                so3 = mink.SO3.from_matrix(rotation[t])
+            pose = mink.SE3.from_rotation_and_translation(so3, targets.positions[t, k])
+            task.set_target(pose)
 
     def refine_feet(self, smoothed: np.ndarray, frames: Iterable[int]) -> np.ndarray:
         """Put the feet of a smoothed trajectory back on their targets, moving the joints only (base fixed).
@@ -161,7 +161,7 @@ class RetargetIk:
         positions = self.configuration.data.xpos[self.key_body_ids]
         return float(np.linalg.norm(positions - self.targets.positions[t], axis=1).mean())
 
-    def _iterate(self, tasks: list) -> None:
+    def _iterate(self, tasks: list[mink.Task]) -> None:
         """One solver step, shortened while it would push a configured body pair deeper into contact.
 
         The collision limit is linear in the closest points' normal; a large step that turns
@@ -193,38 +193,38 @@ class RetargetIk:
             return 0.0
         gap = np.linalg.norm(data.geom_xpos[pairs[:, 0]] - data.geom_xpos[pairs[:, 1]], axis=1)
         candidates = pairs[gap < self.pair_reach]  # bounding spheres overlap
-        distances = [mujoco.mj_geomDistance(self.robot.model, data, int(a), int(b), 0.0, None) for a, b in candidates]
+        distances = []
+        for a, b in candidates:
+            distances.append(mujoco.mj_geomDistance(self.robot.model, data, int(a), int(b), 0.0, None))
         return max(0.0, -min(distances, default=0.0))
 
-    def _step(self, tasks: list) -> np.ndarray:
+    def _step(self, tasks: list[mink.Task]) -> np.ndarray:
         """One QP step; if climbing back above the floor clearance is infeasible with the frame's
         bounds, take the step that only stops the sinking."""
         try:
-            return mink.solve_ik(
-                self.configuration,
-                tasks,
-                1.0,
-                self.settings.solver,
-                damping=self.damping,
-                limits=self.limits,
-            )
+            return self._solve_qp(tasks)
         except mink.NoSolutionFound:
             self.floor.relaxed = True
             try:
-                return mink.solve_ik(
-                    self.configuration,
-                    tasks,
-                    1.0,
-                    self.settings.solver,
-                    damping=self.damping,
-                    limits=self.limits,
-                )
+                return self._solve_qp(tasks)
             finally:
                 self.floor.relaxed = False
 
+    def _solve_qp(self, tasks: list[mink.Task]) -> np.ndarray:
+        # dt = 1: the velocity is the whole frame step, which the step limit bounds in displacement.
+        return mink.solve_ik(
+            self.configuration,
+            tasks,
+            dt=1.0,
+            solver=self.settings.solver,
+            damping=self.damping,
+            limits=self.limits,
+        )
+
     def _clipped(self, q: np.ndarray) -> np.ndarray:
         q = q.copy()
-        q[self.robot.qpos_indices] = np.clip(q[self.robot.qpos_indices], self.step_limit.lower, self.step_limit.upper)
+        joints = self.robot.qpos_indices
+        q[joints] = np.clip(q[joints], self.step_limit.lower, self.step_limit.upper)
         return q
 
     def solve(self, frames: Iterable[int]) -> np.ndarray:
@@ -233,13 +233,16 @@ class RetargetIk:
         out = np.empty((targets.n_frames, self.robot.model.nq))
         self.configuration.update(self.initial_configuration())
         previous = None
-        recent: deque[float] = deque(maxlen=max(1, int(round(self.settings.catch_up_window_s * targets.fps))))
+        window = max(1, round(self.settings.catch_up_window_s * targets.fps))
+        recent: deque[float] = deque(maxlen=window)
         for t in frames:
             if previous is None:
                 out[t] = self._solve_first_frame(t)
             else:
                 # The recent median does not change within a frame.
-                lag_limit = float(np.median(recent)) + self.settings.catch_up_margin_m if recent else np.inf
+                lag_limit = np.inf
+                if recent:
+                    lag_limit = float(np.median(recent)) + self.settings.catch_up_margin_m
                 out[t] = self.solve_frame(t, previous, self.root_steps[t], lag_limit)
             recent.append(self._keypoint_error(t))
             previous = out[t]
