@@ -58,7 +58,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="retarget",
-    version=5,
+    version=6,
     description="human motion -> robot reference motion at 50 Hz (mink IK) + quality.json",
     params=RetargetParams,
     provides="reference",

@@ -116,10 +116,11 @@ def test_body_contacts_rest_on_the_floor(excerpt) -> None:
 
 
 def test_a_stretch_stuck_on_the_wrong_branch_is_solved_again() -> None:
-    """Solved from 60 s, ground2's sit-down leaves the forward IK bent over a standing pose while the
-    human sits (pelvis far above the scaled hips); solved backward from where it has caught up, the
-    stretch is not. With the lag repair off the ruler sees it, with it on the bars hold."""
-    human = _excerpt("ground2_subject2", 60.0, 70.0)
+    """Solved from 61 s of ground2, where the human is down on hands and feet, the forward IK starts
+    from the standing default pose and stays bent over it for about a second (pelvis far above the
+    scaled hips); solved backward from where it has caught up, the stretch is not. With the lag
+    repair off the ruler sees it, with it on the bars hold."""
+    human = _excerpt("ground2_subject2", 61.0, 70.0)
     robot = load_robot("g1")
     figures = {}
     for ratio in (0.0, RetargetParams().repair.error_ratio):

@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 from rd_pipeline.retarget.floor import FloorLimit
 from rd_pipeline.retarget.limits import FrameStepLimit
 from rd_pipeline.retarget.settings import IkSettings, IkWeights
+from rd_pipeline.retarget.smoothing import smoothstep
 from rd_pipeline.retarget.targets import RetargetTargets
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.hulls import BodyHulls
@@ -328,9 +329,10 @@ def _position_cost_schedule(targets: RetargetTargets, config, weights: IkWeights
     costs[resting, root] = np.maximum(costs[resting, root], weights.contact_position)
     for side, foot in enumerate(config.foot_bodies):
         k = targets.bodies.index(foot)
-        # A swinging foot near the floor must not slide either: the full cost until it is lifted.
-        height = targets.positions[:, k, 2] - np.min(targets.positions[:, k, 2])
-        lifted = np.clip(height / weights.swing_lift_height_m, 0.0, 1.0)
+        # A swinging foot's target first rises to its clearance, then travels. Until it has risen
+        # the foot is held along the floor like a planted one: any slide there reads as skate.
+        risen = targets.foot_lift[:, side] / targets.swing_clearance_m
+        lifted = smoothstep(1.0 - (1.0 - risen) / weights.swing_cost_ramp)
         swing = weights.feet_position + lifted * (weights.swing_feet_position - weights.feet_position)
         costs[:, k, :2] = np.where(targets.foot_contact[:, side], weights.feet_position, swing)[:, None]
         # Along its own up axis a swinging foot keeps the planted cost: it clears the floor as its

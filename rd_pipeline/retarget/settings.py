@@ -43,6 +43,9 @@ class TargetShaping:
     plant_drift: PlantDrift = PlantDrift()
     """When a long plant is cut by a short swing (a shuffle step the contact label missed)."""
 
+    def __post_init__(self) -> None:
+        require_positive(self, "swing_clearance_m")
+
 
 @dataclass(frozen=True)
 class BodyContactSettings:
@@ -85,9 +88,14 @@ class IkWeights:
     feet_position: float = 100.0
     """Planted feet position (they must not slide)."""
     swing_feet_position: float = 20.0
-    """Swinging feet position, once lifted (they guide the leg; the body follows the pelvis) ..."""
-    swing_lift_height_m: float = 0.1
-    """... reached over this height above the foot's lowest target; below, the planted cost."""
+    """Swinging feet position, once risen (they guide the leg; the body follows the pelvis) ..."""
+    swing_cost_ramp: float = 0.3
+    """... eased into over the last this fraction of the foot's rise to the swing clearance; before,
+    the planted cost (the target does not travel until it has risen)."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "swing_cost_ramp")
+
     feet_orientation: float = 10.0
     """Feet orientation (planted feet stay flat)."""
     limb_position: float = 0.5

@@ -46,6 +46,8 @@ class RetargetTargets:
     """(T, 2) left/right foot planted, from the human feet."""
     foot_lift: np.ndarray
     """(T, 2) height the left/right sole target clears the floor by (0 planted, the swing clearance mid-swing)."""
+    swing_clearance_m: float
+    """The clearance a swinging sole target rises to before it travels."""
     body_contact: np.ndarray
     """(T, K) which key bodies (other than the feet) rest on the floor, from the human joints."""
     human_scale: float
@@ -211,6 +213,7 @@ def build_targets(
         orientations=orientations,
         foot_contact=contact,
         foot_lift=foot_lift,
+        swing_clearance_m=shape.swing_clearance_m,
         body_contact=resting,
         human_scale=root_scale,
         human_pelvis=human_pos[:, index[PELVIS]] * root_scale,
