@@ -28,12 +28,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.commands import training_seconds, trial_artifact
 from rd_pipeline.evaluation.metrics import ERROR_METRICS, t_interval
 from rd_pipeline.evaluation.report import REPORT_JSON
-from rd_pipeline.rl.trainer import LOG_FILE
+from rd_pipeline.rl.trainer import CHECKPOINT_DIR, LOG_FILE
 from rd_pipeline.stages.train import PROFILE_FILE
 from rd_pipeline.sweeps.ablation import STUDIES, format_cell
 from rd_pipeline.sweeps.findings import PAPER_RESAMPLING, PAPER_TABLE_R5, RESIDUAL_CLAIMS, SAMPLER_CLAIMS, Claim, judge
@@ -42,6 +43,8 @@ from rd_pipeline.sweeps.runner import Trial
 ROBOT = "g1"
 CURVE_STATISTICS = ("early_episode_length_s", "late_episode_length_s", "late_reward")
 """Per-seed learning-curve statistics: means over the first and over the last `--curve-window` iterations."""
+SATURATED_EMA = 0.95
+"""A segment whose failure EMA is at least this is saturated: nearly every episode started there fails."""
 
 
 @dataclass(frozen=True)
@@ -166,7 +169,15 @@ def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
     row["early_episode_length_s"] = round(float(np.mean(row["curve"]["episode_length_s"][:window])), 4)
     row["late_episode_length_s"] = round(float(np.mean(row["curve"]["episode_length_s"][-window:])), 4)
     row["late_reward"] = round(float(np.mean(row["curve"]["reward"][-window:])), 4)
+    row["failure_ema"] = final_failure_ema(train)
     return row
+
+
+def final_failure_ema(train: Path) -> list[float]:
+    """The sampler's per-segment failure EMA at the last checkpoint: what the failure prior weighed."""
+    checkpoints = sorted((train / CHECKPOINT_DIR).glob("model_*.pt"), key=lambda f: int(f.stem.split("_")[1]))
+    state = torch.load(checkpoints[-1], map_location="cpu", weights_only=False)
+    return [round(float(rate), 3) for rate in state["sampler"]["failure_rate"]]
 
 
 def summary(args: argparse.Namespace) -> dict:
@@ -253,11 +264,32 @@ def markdown(result: dict) -> str:
         lines.append(
             f"| {claim['claim']} | {claim['metric']} | {seeds} | {difference} | {interval} | {claim['verdict']} |"
         )
+    lines += failure_ema_lines(result)
     quoted = sorted({column for row in spec.paper.values() for column in row}, key=columns.index)
     lines += ["", spec.paper_caption, "", "| arm | " + " | ".join(quoted) + " |", "|" + "---|" * (len(quoted) + 1)]
     for arm, row in spec.paper.items():
         lines.append(f"| {arm} | " + " | ".join(row.get(c, "–") for c in quoted) + " |")
     return "\n".join(lines) + "\n"
+
+
+def failure_ema_lines(result: dict) -> list[str]:
+    """How much the failure prior had to go on: segments whose failure EMA is saturated at the end."""
+    lines = [
+        "",
+        f"The sampler's failure EMA per segment at the last checkpoint. A prior over segments that all "
+        f"fail (EMA >= {SATURATED_EMA}) is flat: it cannot prefer the hard ones.",
+        "",
+        "| arm | seed | segments | saturated | lowest EMA |",
+        "|---|---|---|---|---|",
+    ]
+    for arm in result["arms"]:
+        for seed in arm["seeds"]:
+            ema = np.asarray(seed.get("failure_ema", []))
+            if ema.size == 0:
+                continue
+            saturated = int(np.sum(ema >= SATURATED_EMA))
+            lines.append(f"| {arm['arm']} | {seed['seed']} | {ema.size} | {saturated} | {ema.min():.2f} |")
+    return lines
 
 
 def copy_sampler_profiles(result: dict, out: Path) -> None:
