@@ -75,7 +75,8 @@ class BodyContactSettings:
 
 @dataclass(frozen=True)
 class IkWeights:
-    """Task costs: position in 1/m, orientation in 1/rad. Larger = followed more closely."""
+    """Task costs (position in 1/m, orientation in 1/rad; larger = followed more closely), when a
+    swinging foot's cost changes, and the QP's damping."""
 
     root_position: float = 15.0
     """Pelvis position along its forward and left axes."""
@@ -143,7 +144,8 @@ class IkSettings:
     step_halvings: int = 4
     """A step pushing a configured body pair deeper into contact is halved up to this many times, then dropped ..."""
     pair_depth_tolerance_m: float = 0.002
-    """... where contact means deeper than this (touching is allowed: the self-collision ruler counts from 5 mm) ..."""
+    """... where contact means deeper than this (touching is allowed; the self-collision ruler counts
+    from its own `QualityThresholds.self_collision_depth_m`) ..."""
     pair_depth_limit_m: float = 0.004
     """... and the shortest step is still taken while no pair gets deeper than this."""
     floor_clearance_m: float = 0.002
