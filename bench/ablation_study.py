@@ -34,7 +34,7 @@ from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.commands import training_seconds, trial_artifact
 from rd_pipeline.evaluation.metrics import ERROR_METRICS, t_interval
 from rd_pipeline.evaluation.report import REPORT_JSON
-from rd_pipeline.rl.trainer import CHECKPOINT_DIR, LOG_FILE
+from rd_pipeline.rl.trainer import LOG_FILE, checkpoints_by_iteration
 from rd_pipeline.stages.train import PROFILE_FILE
 from rd_pipeline.sweeps.ablation import STUDIES, format_cell
 from rd_pipeline.sweeps.findings import PAPER_RESAMPLING, PAPER_TABLE_R5, RESIDUAL_CLAIMS, SAMPLER_CLAIMS, Claim, judge
@@ -175,8 +175,8 @@ def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
 
 def final_failure_ema(train: Path) -> list[float]:
     """The sampler's per-segment failure EMA at the last checkpoint: what the failure prior weighed."""
-    checkpoints = sorted((train / CHECKPOINT_DIR).glob("model_*.pt"), key=lambda f: int(f.stem.split("_")[1]))
-    state = torch.load(checkpoints[-1], map_location="cpu", weights_only=False)
+    last = list(checkpoints_by_iteration(train).values())[-1]
+    state = torch.load(last, map_location="cpu", weights_only=False)
     return [round(float(rate), 3) for rate in state["sampler"]["failure_rate"]]
 
 

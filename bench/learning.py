@@ -26,6 +26,7 @@ from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.evaluate import nominal, survival, zero_action
 from rd_pipeline.rl.ppo import build_ppo
 from rd_pipeline.rl.rewards import GROUPS
+from rd_pipeline.rl.trainer import CHECKPOINT_DIR, checkpoints_by_iteration
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SegmentSampler
 from rd_pipeline.stages import REGISTRY
@@ -65,10 +66,9 @@ def main() -> None:
     env = make_env()
     zero = float(survival(env, zero_action(env.num_actions), torch.tensor([0]))[0])
     rows = {"clip_s": reference.n_frames / 50.0, "zero_action_survival_s": zero, "checkpoints": {}}
-    checkpoint_dir = (
-        args.checkpoints / "checkpoints" if (args.checkpoints / "checkpoints").is_dir() else args.checkpoints
-    )
-    for path in sorted(checkpoint_dir.glob("model_*.pt"), key=lambda p: int(p.stem.split("_")[1])):
+    # Either the training folder or its checkpoints folder.
+    folder = args.checkpoints if (args.checkpoints / CHECKPOINT_DIR).is_dir() else args.checkpoints.parent
+    for path in checkpoints_by_iteration(folder).values():
         env = make_env()
         ppo = build_ppo(env.get_observations(), 1, env.num_actions, len(GROUPS), params.ppo)
         ppo.load(torch.load(path, weights_only=False)["algorithm"], None, strict=True)

@@ -29,11 +29,11 @@ import numpy as np
 from rd_pipeline import paths
 from rd_pipeline.evaluation.retarget_quality import retarget_quality
 from rd_pipeline.motion.bvh import read_bvh
-from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
+from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.retarget.retarget import retarget
+from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.retarget.settings import RetargetParams
-from rd_pipeline.robots import load_robot
+from rd_pipeline.robots import Robot, load_robot
 from rd_pipeline.stages.import_motion import ImportParams
 
 TAKES = [
@@ -121,29 +121,11 @@ def _measure(robot_name: str, motion: str, cores) -> dict:
 
 
 def _retarget_and_score(robot_name: str, motion: str) -> dict:
-    params = RetargetParams()
     import_params = ImportParams()
     human = human_motion_from_bvh(read_bvh(paths.bvh_path(motion)), LAFAN_CM_TO_M, LAFAN_TO_Z_UP)
     robot = load_robot(robot_name)
-    began = time.perf_counter()
-    result = retarget(human, robot, params)
-    seconds = time.perf_counter() - began
+    result, ours, seconds = retarget_and_score(human, robot)
     targets = result.targets
-    ours = retarget_quality(
-        robot,
-        result.reference,
-        keypoint_targets=targets.positions,
-        keypoint_bodies=targets.bodies,
-        frames_per_s=result.reference.n_frames / seconds,
-        human_pelvis=targets.human_pelvis,
-    )
-    root = targets.bodies.index(robot.config.root_body)
-    off_target = np.linalg.norm(
-        result.reference.body_pos_w[:, result.reference.body_names.index(robot.config.root_body)]
-        - targets.positions[:, root],
-        axis=1,
-    )
-    ours["pelvis_off_target_pct"] = round(100.0 * float(np.mean(off_target > 0.2)), 2)
     row = {"robot": robot_name, "motion": motion, "seconds": round(seconds, 2), "ours": ours, "dataset": None}
     csv = paths.csv_path(robot_name, motion)
     if csv is not None and csv.exists():
@@ -169,6 +151,33 @@ def _retarget_and_score(robot_name: str, motion: str) -> dict:
             human_pelvis=pelvis,
         )
     return row
+
+
+def retarget_and_score(
+    human: HumanMotion, robot: Robot, params: RetargetParams | None = None
+) -> tuple[RetargetResult, dict, float]:
+    """Retarget `human` onto `robot`, timed, and score it against the scaled human: the result, the
+    quality report (with throughput and the pelvis-off-target share) and the seconds it took."""
+    began = time.perf_counter()
+    result = retarget(human, robot, params or RetargetParams())
+    seconds = time.perf_counter() - began
+    targets = result.targets
+    quality = retarget_quality(
+        robot,
+        result.reference,
+        keypoint_targets=targets.positions,
+        keypoint_bodies=targets.bodies,
+        frames_per_s=result.reference.n_frames / seconds,
+        human_pelvis=targets.human_pelvis,
+    )
+    root = targets.bodies.index(robot.config.root_body)
+    off_target = np.linalg.norm(
+        result.reference.body_pos_w[:, result.reference.body_names.index(robot.config.root_body)]
+        - targets.positions[:, root],
+        axis=1,
+    )
+    quality["pelvis_off_target_pct"] = round(100.0 * float(np.mean(off_target > 0.2)), 2)
+    return result, quality, seconds
 
 
 def _aligned(reference, positions: np.ndarray, bodies):

@@ -28,11 +28,12 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.export.exporter import build_policy_spec, load_actor, script_actor
     from rd_pipeline.export.onnx_policy import ONNX_FILE, OnnxPolicy, export_onnx
     from rd_pipeline.export.policy_spec import POLICY_FILE, SPEC_FILE, load_policy_spec
+    from rd_pipeline.rl.trainer import checkpoints_by_iteration
     from rd_pipeline.robots import load_robot
 
     train = ctx.upstream["policy"]
     manifest = train.manifest
-    checkpoints = {int(f.stem.split("_")[1]): f for f in (train.path / "checkpoints").glob("model_*.pt")}
+    checkpoints = checkpoints_by_iteration(train.path)
     if not checkpoints:
         raise PipelineError(f"{train.path}: the training artifact has no checkpoints")
     iteration = ctx.params.checkpoint or max(checkpoints)

@@ -79,7 +79,15 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.rl.env import TrackingEnv
     from rd_pipeline.rl.ppo import build_ppo
     from rd_pipeline.rl.rewards import GROUPS
-    from rd_pipeline.rl.trainer import CHECKPOINT_DIR, LOG_FILE, load_checkpoint, plot_learning_curve, train
+    from rd_pipeline.rl.trainer import (
+        CHECKPOINT_DIR,
+        LOG_FILE,
+        checkpoint_path,
+        checkpoints_by_iteration,
+        load_checkpoint,
+        plot_learning_curve,
+        train,
+    )
     from rd_pipeline.robots import load_robot
     from rd_pipeline.sampling.plots import plot_sampler_profile
     from rd_pipeline.sampling.prior import PRIOR_FILE
@@ -104,7 +112,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     # Checkpoints and the log live in the work folder, which survives an interruption; --resume
     # continues from its newest checkpoint, and a fresh run starts it over.
     work = ctx.work_dir or ctx.out_dir
-    checkpoints = sorted((work / CHECKPOINT_DIR).glob("model_*.pt"), key=lambda f: int(f.stem.split("_")[1]))
+    checkpoints = list(checkpoints_by_iteration(work).values())
     start_iteration = 0
     shorter = None
     if ctx.resume and checkpoints:
@@ -123,7 +131,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         shutil.copytree(shorter.path / CHECKPOINT_DIR, work / CHECKPOINT_DIR)
         shutil.copy2(shorter.path / LOG_FILE, work / LOG_FILE)
         done = shorter.manifest["params"]["iterations"]
-        start_iteration = load_checkpoint(work / CHECKPOINT_DIR / f"model_{done}.pt", ppo, env)
+        start_iteration = load_checkpoint(checkpoint_path(work, done), ppo, env)
         (work / CONTINUED_FILE).write_text(shorter.key + "\n")
         ctx.console.print(f"  continuing the {done}-iteration run {shorter.key}")
     with ctx.progress(p.iterations - start_iteration, f"PPO {ctx.robot}") as advance:

@@ -19,6 +19,17 @@ CHECKPOINT_DIR = "checkpoints"
 LOG_FILE = "training_log.jsonl"
 
 
+def checkpoint_path(folder: Path, iteration: int) -> Path:
+    """Where a training folder keeps the checkpoint saved after `iteration` iterations."""
+    return folder / CHECKPOINT_DIR / f"model_{iteration}.pt"
+
+
+def checkpoints_by_iteration(folder: Path) -> dict[int, Path]:
+    """A training folder's checkpoints keyed by the iteration each was saved after, oldest first."""
+    found = {int(path.stem.removeprefix("model_")): path for path in (folder / CHECKPOINT_DIR).glob("model_*.pt")}
+    return dict(sorted(found.items()))
+
+
 def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, env: TrackingEnv) -> None:
     """Written beside its final name and renamed, so an interrupted save never leaves a torn checkpoint."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -108,7 +119,7 @@ def train(
         on_iteration(row)
         done = iteration + 1
         if done % checkpoint_every == 0 or done == iterations:
-            save_checkpoint(out_dir / CHECKPOINT_DIR / f"model_{done}.pt", done, ppo, env)
+            save_checkpoint(checkpoint_path(out_dir, done), done, ppo, env)
     log.close()
     return history
 
