@@ -94,9 +94,6 @@ class IkWeights:
     """... eased into over the last this fraction of the foot's rise to the swing clearance; before,
     the planted cost (the target does not travel until it has risen)."""
 
-    def __post_init__(self) -> None:
-        require_positive(self, "swing_cost_ramp")
-
     feet_orientation: float = 10.0
     """Feet orientation (planted feet stay flat)."""
     limb_position: float = 0.5
@@ -107,6 +104,9 @@ class IkWeights:
     """Pull toward the default pose, for joints the key bodies leave free."""
     damping: float = 0.05
     """Levenberg-Marquardt damping of the QP."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "swing_cost_ramp")
 
 
 @dataclass(frozen=True)
