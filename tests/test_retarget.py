@@ -82,14 +82,14 @@ def test_planted_feet_stay_put_and_follow_their_sole_target(g1_dance: RetargetRe
             angles.append(np.degrees(np.arccos(np.clip(np.einsum("ti,ti->t", up, target_up), -1, 1))))
             flat.append(np.degrees(np.arccos(np.clip(target_up[:, 2], -1, 1))) < 1.0)
     # Flat, or tilted as the human's foot is (heel up): the sole follows its target; a heel-up
-    # target beyond the ankle's range is followed as far as the range allows.
+    # target beyond the ankle's range is followed as far as the range allows. The foot orientation
+    # cost trades sole tilt for stillness: at 5 (the default) this excerpt measures tilt p95 5.1 deg,
+    # max 18.2, and plants slide at most 3.9 mm; at 10, tilt p95 3.2, max 13.6, slides up to 14.7 mm.
     angles = np.concatenate(angles)
-    assert np.percentile(angles, 95) < 5.0 and angles.max() < 20.0
+    assert np.percentile(angles, 95) < 6.0 and angles.max() < 20.0
     assert np.concatenate(flat).mean() > 0.5
-    # A plant in a deep lunge can slide a little where the ankle reaches its pitch limit (on the
-    # three whole dance1 takes: 3 of 445 plants over 10 mm, the largest 14.8 mm).
     slides = np.array(slides)
-    assert np.median(slides) < 0.003 and slides.max() < 0.02 and (slides > 0.01).sum() <= 1
+    assert np.median(slides) < 0.0015 and slides.max() < 0.01
 
 
 def test_scale_comes_from_the_models() -> None:

@@ -94,8 +94,10 @@ class IkWeights:
     """... eased into over the last this fraction of the foot's rise to the swing clearance; before,
     the planted cost (the target does not travel until it has risen)."""
 
-    feet_orientation: float = 10.0
-    """Feet orientation (planted feet stay flat)."""
+    feet_orientation: float = 5.0
+    """Feet orientation (planted soles flat, or tilted as the human's). Higher keeps soles flatter but
+    fights the legs: at 10, on the nine shared takes, feet slide more, joints jerk more and H1's dance
+    frames diverge (bench/results/retarget.md)."""
     limb_position: float = 0.5
     """Knees, hips, shoulders, elbows and hands."""
     contact_position: float = 20.0
