@@ -25,7 +25,6 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from rd_pipeline import paths
 from rd_pipeline.evaluation.retarget_quality import retarget_quality
@@ -171,6 +170,7 @@ def retarget_and_score(
         keypoint_bodies=targets.bodies,
         frames_per_s=result.reference.n_frames / seconds,
         human_pelvis=targets.human_pelvis,
+        foot_orientations=targets.foot_orientations(robot.config.foot_bodies),
     )
     root = targets.bodies.index(robot.config.root_body)
     off_target = np.linalg.norm(
@@ -179,23 +179,7 @@ def retarget_and_score(
         axis=1,
     )
     quality["pelvis_off_target_pct"] = round(100.0 * float(np.mean(off_target > 0.2)), 2)
-    quality["planted_foot_turn_p95_deg"] = round(_planted_foot_turn_p95_deg(result, robot), 2)
     return result, quality, seconds
-
-
-def _planted_foot_turn_p95_deg(result: RetargetResult, robot: Robot) -> float:
-    """95th percentile of how far a planted foot is turned from its target (flat, or tilted as the
-    human's): the price of a lower foot orientation cost, which the other columns do not show."""
-    reference = result.reference
-    targets = result.targets
-    angles = []
-    for side, foot in enumerate(robot.config.foot_bodies):
-        planted = targets.foot_contact[:, side].astype(bool)
-        quat = reference.body_quat_w[planted, reference.body_names.index(foot)]
-        actual = Rotation.from_quat(quat, scalar_first=True)
-        wanted = Rotation.from_matrix(targets.orientations[foot][planted])
-        angles.append(np.degrees((wanted.inv() * actual).magnitude()))
-    return float(np.percentile(np.concatenate(angles), 95.0))
 
 
 def _aligned(reference, positions: np.ndarray, bodies):

@@ -78,7 +78,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="import",
-    version=2,
+    version=3,
     description="LAFAN1_Retargeting_Dataset CSV -> robot reference motion at 50 Hz",
     params=ImportParams,
     provides="reference",

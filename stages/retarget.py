@@ -40,7 +40,8 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     reference, targets = result.reference, result.targets
     reference.save(ctx.out_dir / REFERENCE_FILE)
     targets.save(ctx.out_dir / TARGETS_FILE)
-    series = quality_series(robot, reference, targets.positions, targets.bodies, targets.human_pelvis)
+    feet = targets.foot_orientations(robot.config.foot_bodies)
+    series = quality_series(robot, reference, targets.positions, targets.bodies, targets.human_pelvis, feet)
     np.savez(ctx.out_dir / QUALITY_SERIES_FILE, **series)
     quality = summarize_quality(robot, reference, series, frames_per_s=reference.n_frames / seconds)
     (ctx.out_dir / QUALITY_FILE).write_text(json.dumps(quality, indent=2) + "\n")
@@ -58,7 +59,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="retarget",
-    version=6,
+    version=7,
     description="human motion -> robot reference motion at 50 Hz (mink IK) + quality.json",
     params=RetargetParams,
     provides="reference",

@@ -9,6 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 from conftest import RETARGETED_DIR
+from scipy.spatial.transform import Rotation
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.retarget_quality import FootMeshes, QualityThresholds, quality_series, retarget_quality
@@ -39,6 +40,7 @@ KEYS = {
     "diverged_frames",
     "root_speed_p999_m_s",
     "human_root_speed_p999_m_s",
+    "planted_foot_turn_p95_deg",
 }
 
 # G1 left arm swung in across the chest: the elbow sinks into the torso (found by a grid search over the
@@ -284,6 +286,27 @@ def test_pelvis_height_and_divergence_rulers(g1) -> None:
     assert quality["diverged_frames"] == 3
     assert quality["keypoint_error_max_mm"] == pytest.approx(1000.0 * np.sqrt(3 * 0.51**2), abs=1e-3)
     assert quality["root_speed_p999_m_s"] == 0.0
+
+
+def test_planted_foot_turn_counts_planted_feet_only(g1) -> None:
+    """A sole turned 12 deg from its target while planted is measured; a foot in the air is not."""
+    n_frames = 40
+    standing = _hand_built(g1, _standing(g1, n_frames))
+    planted = np.zeros((n_frames, 2), dtype=bool)
+    planted[:30, 0] = True  # left foot planted for 30 frames, the right never
+    reference = dataclasses.replace(standing, foot_contact=planted)
+    feet = [reference.body_names.index(foot) for foot in g1.config.foot_bodies]
+    exact = Rotation.from_quat(reference.body_quat_w[:, feet].reshape(-1, 4), scalar_first=True)
+    exact = exact.as_matrix().reshape(n_frames, 2, 3, 3)
+    assert retarget_quality(g1, reference, foot_orientations=exact)["planted_foot_turn_p95_deg"] == 0.0
+    turned = exact @ Rotation.from_euler("x", 12.0, degrees=True).as_matrix()
+    turned[:, 1] = Rotation.from_euler("y", 80.0, degrees=True).as_matrix()  # never planted: ignored
+    series = quality_series(g1, reference, foot_orientations=turned)["planted_foot_turn_deg"]
+    assert np.allclose(series[:30], 12.0) and np.isnan(series[30:]).all()
+    assert retarget_quality(g1, reference, foot_orientations=turned)["planted_foot_turn_p95_deg"] == 12.0
+    assert retarget_quality(g1, reference)["planted_foot_turn_p95_deg"] is None
+    with pytest.raises(PipelineError, match="foot_orientations has shape"):
+        retarget_quality(g1, reference, foot_orientations=exact[:, :1])
 
 
 def test_a_geom_the_floor_ruler_cannot_measure_is_named() -> None:

@@ -29,7 +29,14 @@ def test_view_human_and_retargeted_robot(artifacts: Path, tmp_path: Path) -> Non
     assert rows.pop("/targets/retarget") == 6575
     # The rulers as plots on the same timeline.
     plots = {name: rows.pop(name) for name in list(rows) if name.startswith("/quality/")}
-    rulers = ["penetration_m", "keypoint_error_m", "pelvis_height_dev_m", "root_speed_m_s", "human_root_speed_m_s"]
+    rulers = [
+        "penetration_m",
+        "keypoint_error_m",
+        "pelvis_height_dev_m",
+        "root_speed_m_s",
+        "human_root_speed_m_s",
+        "planted_foot_turn_deg",
+    ]
     assert plots == {f"/quality/retarget/{name}": 6575 for name in rulers}
     # One moving mesh per G1 body (all 24 have a visual mesh), every frame of the 50 Hz reference.
     assert sorted(rows) == sorted(f"/robot/retarget/{b}" for b in load_robot("g1").body_names)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
@@ -92,6 +93,7 @@ def quality_series(
     keypoint_targets: np.ndarray | None = None,
     keypoint_bodies: Sequence[str] | None = None,
     human_pelvis: np.ndarray | None = None,
+    foot_orientations: np.ndarray | None = None,
 ) -> dict[str, np.ndarray]:
     """Per-frame rulers on the reference's timeline (for plots and for finding a bad frame).
 
@@ -100,6 +102,8 @@ def quality_series(
     `keypoint_error_m`: mean distance of the key bodies to their scaled-human targets.
     `pelvis_height_dev_m`: robot pelvis height minus the scaled human hips height, median offset removed.
     `root_speed_m_s` / `human_root_speed_m_s`: speed of the floating base and of the scaled human hips.
+    `planted_foot_turn_deg`: how far the planted feet (`reference.foot_contact`) are turned from their
+    target orientations `foot_orientations` (T, 2, 3, 3), the larger of the two; NaN where none is planted.
     """
     if tuple(reference.joint_names) != tuple(robot.config.joint_names):
         raise PipelineError(f"reference joints do not match robot {robot.config.name}'s joint order")
@@ -125,6 +129,8 @@ def quality_series(
         difference = reference.body_pos_w[:, root, 2] - human_pelvis[:, 2]
         series["pelvis_height_dev_m"] = difference - np.median(difference)
         series["human_root_speed_m_s"] = np.linalg.norm(_gradient(human_pelvis, dt), axis=-1)
+    if foot_orientations is not None:
+        series["planted_foot_turn_deg"] = _planted_foot_turn(robot, reference, foot_orientations)
     return series
 
 
@@ -136,6 +142,7 @@ def retarget_quality(
     keypoint_bodies: Sequence[str] | None = None,
     frames_per_s: float | None = None,
     human_pelvis: np.ndarray | None = None,
+    foot_orientations: np.ndarray | None = None,
 ) -> dict[str, float | int | str | None]:
     """SPEC retargeting metrics of one reference motion, as JSON-ready plain numbers.
 
@@ -144,7 +151,7 @@ def retarget_quality(
     are None. `frames_per_s` is the retargeter's throughput, passed through. `skate_stance_mean_mm_s` is
     0.0 when no foot ever comes within the contact height: a clip that never stands cannot skate.
     """
-    series = quality_series(robot, reference, keypoint_targets, keypoint_bodies, human_pelvis)
+    series = quality_series(robot, reference, keypoint_targets, keypoint_bodies, human_pelvis, foot_orientations)
     return summarize_quality(robot, reference, series, thresholds, frames_per_s)
 
 
@@ -169,6 +176,8 @@ def summarize_quality(
     error = series.get("keypoint_error_m")
     pelvis_dev = series.get("pelvis_height_dev_m")
     human_speed = series.get("human_root_speed_m_s")
+    foot_turn = series.get("planted_foot_turn_deg")
+    planted_turn = None if foot_turn is None else foot_turn[~np.isnan(foot_turn)]
 
     return {
         "frames": int(reference.n_frames),
@@ -190,6 +199,7 @@ def summarize_quality(
         "diverged_frames": None if error is None else int(diverged(error, thresholds).sum()),
         "root_speed_p999_m_s": _round(np.percentile(series["root_speed_m_s"], 99.9)),
         "human_root_speed_p999_m_s": None if human_speed is None else _round(np.percentile(human_speed, 99.9)),
+        "planted_foot_turn_p95_deg": _planted_turn_p95(planted_turn),
     }
 
 
@@ -284,6 +294,28 @@ def _keypoint_error(reference: ReferenceMotion, targets: np.ndarray, bodies: Seq
         raise PipelineError(f"keypoint body '{missing[0]}' is not among the reference's bodies")
     index = [reference.body_names.index(b) for b in bodies]
     return np.linalg.norm(reference.body_pos_w[:, index] - targets, axis=-1).mean(axis=1)
+
+
+def _planted_foot_turn(robot: Robot, reference: ReferenceMotion, foot_orientations: np.ndarray) -> np.ndarray:
+    """(T,) degrees between each planted foot and its target orientation, the larger foot; NaN if none planted."""
+    wanted = np.asarray(foot_orientations, dtype=float)
+    if wanted.shape != (reference.n_frames, 2, 3, 3):
+        raise PipelineError(f"foot_orientations has shape {wanted.shape}, expected ({reference.n_frames}, 2, 3, 3)")
+    turn = np.full((reference.n_frames, 2), np.nan)
+    for side, foot in enumerate(robot.config.foot_bodies):
+        planted = reference.foot_contact[:, side].astype(bool)
+        quat = reference.body_quat_w[planted, reference.body_names.index(foot)]
+        offset = Rotation.from_matrix(wanted[planted, side]).inv() * Rotation.from_quat(quat, scalar_first=True)
+        turn[planted, side] = np.degrees(offset.magnitude())
+    # fmax skips a NaN (an unplanted foot) unless both are.
+    return np.fmax(turn[:, 0], turn[:, 1])
+
+
+def _planted_turn_p95(turn: np.ndarray | None) -> float | None:
+    """p95 of the planted-foot turn; 0.0 for a clip that never plants a foot."""
+    if turn is None:
+        return None
+    return _round(np.percentile(turn, 95.0)) if turn.size else 0.0
 
 
 def _gradient(values: np.ndarray, dt: float) -> np.ndarray:

@@ -59,6 +59,10 @@ class RetargetTargets:
     def n_frames(self) -> int:
         return self.positions.shape[0]
 
+    def foot_orientations(self, feet: tuple[str, str]) -> np.ndarray:
+        """(T, 2, 3, 3) target orientations of the left and right foot bodies."""
+        return np.stack([self.orientations[foot] for foot in feet], axis=1)
+
     def save(self, path) -> None:
         """Keypoint targets for viewing beside the robot (the orientations are not needed there)."""
         np.savez(

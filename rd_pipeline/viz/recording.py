@@ -55,7 +55,7 @@ def record_motion(
                 # The rulers as plots on the same timeline: a bad frame is a spike to click on.
                 with open_npz(series) as data:
                     for name in data.files:
-                        if name.endswith(("_m", "_m_s")):  # measures, not body indices
+                        if name.endswith(("_m", "_m_s", "_deg")):  # measures, not body indices
                             log_series(rec, f"quality/{stage}/{name}", data[name], reference.fps)
             if tracked is not None:
                 log_tracked(rec, model, reference, tracked, SIDE_BY_SIDE_M)
