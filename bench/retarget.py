@@ -88,11 +88,8 @@ def main() -> None:
     args = parser.parse_args()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     log = args.out.with_suffix(".jsonl")
-    rows = [json.loads(line) for line in log.read_text().splitlines()] if args.resume and log.exists() else []
-    if not args.resume:
-        log.write_text("")
-    done = {(row["robot"], row["motion"]) for row in rows}
-    todo = [(robot, motion) for motion in args.motions for robot in args.robots if (robot, motion) not in done]
+    rows = resume_log(log, args.resume)
+    todo = pending(rows, args.motions, args.robots)
     cores = multiprocessing.Manager().Queue()
     for core in sorted(os.sched_getaffinity(0))[: args.jobs]:
         cores.put(core)
@@ -105,11 +102,30 @@ def main() -> None:
                 file.write(json.dumps(row) + "\n")
             label = f"{row['robot']:<5} {row['motion']:<26} {row['seconds']:7.1f} s"
             print(f"{label}  {_verdict(row['ours'])}", flush=True)
-    order = {(robot, motion): i for i, (motion, robot) in enumerate((m, r) for m in args.motions for r in args.robots)}
-    rows.sort(key=lambda row: order.get((row["robot"], row["motion"]), len(order)))
+    rows = in_take_order(rows, args.motions, args.robots)
     args.out.with_suffix(".json").write_text(json.dumps(rows, indent=2) + "\n")
     args.out.with_suffix(".md").write_text(_table(rows))
     print(_table(rows))
+
+
+def resume_log(log: Path, resume: bool) -> list[dict]:
+    """The rows already in a bench's `.jsonl` log when resuming; otherwise the log starts empty."""
+    if resume and log.exists():
+        return [json.loads(line) for line in log.read_text().splitlines()]
+    log.write_text("")
+    return []
+
+
+def pending(rows: list[dict], motions: list[str], robots: list[str]) -> list[tuple[str, str]]:
+    """The (robot, take) pairs `rows` does not have yet, take by take."""
+    done = {(row["robot"], row["motion"]) for row in rows}
+    return [(robot, motion) for motion in motions for robot in robots if (robot, motion) not in done]
+
+
+def in_take_order(rows: list[dict], motions: list[str], robots: list[str]) -> list[dict]:
+    """`rows` take by take, robots in the order asked; rows of other takes or robots last."""
+    order = {(robot, motion): i for i, (motion, robot) in enumerate((m, r) for m in motions for r in robots)}
+    return sorted(rows, key=lambda row: order.get((row["robot"], row["motion"]), len(order)))
 
 
 def _measure(robot_name: str, motion: str, cores) -> dict:

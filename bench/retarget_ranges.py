@@ -30,7 +30,7 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from retarget import TAKES, retarget_and_score  # bench/retarget.py
+from retarget import TAKES, in_take_order, pending, resume_log, retarget_and_score  # bench/retarget.py
 
 from rd_pipeline import paths
 from rd_pipeline.motion.bvh import read_bvh
@@ -62,13 +62,8 @@ def main() -> None:
     args = parser.parse_args()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     log = args.out.with_suffix(".jsonl")
-    rows = []
-    if args.resume and log.exists():
-        rows = [json.loads(line) for line in log.read_text().splitlines()]
-    else:
-        log.write_text("")
-    done = {(row["robot"], row["motion"]) for row in rows}
-    todo = [(robot, motion) for motion in args.motions for robot in args.robots if (robot, motion) not in done]
+    rows = resume_log(log, args.resume)
+    todo = pending(rows, args.motions, args.robots)
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
         futures = [pool.submit(_row, robot, motion, args.widen_rad) for robot, motion in todo]
         for future in as_completed(futures):
@@ -77,8 +72,7 @@ def main() -> None:
             with log.open("a") as file:
                 file.write(json.dumps(row) + "\n")
             print(f"{row['robot']:<5} {row['motion']:<26} diverged {_change(row, 'diverged_frames')}", flush=True)
-    order = {(robot, motion): i for i, (motion, robot) in enumerate((m, r) for m in args.motions for r in args.robots)}
-    rows.sort(key=lambda row: order.get((row["robot"], row["motion"]), len(order)))
+    rows = in_take_order(rows, args.motions, args.robots)
     args.out.with_suffix(".md").write_text(_table(rows, args.widen_rad))
     print(_table(rows, args.widen_rad))
 

@@ -177,7 +177,6 @@ def summarize_quality(
     pelvis_dev = series.get("pelvis_height_dev_m")
     human_speed = series.get("human_root_speed_m_s")
     foot_turn = series.get("planted_foot_turn_deg")
-    planted_turn = None if foot_turn is None else foot_turn[~np.isnan(foot_turn)]
 
     return {
         "frames": int(reference.n_frames),
@@ -199,7 +198,7 @@ def summarize_quality(
         "diverged_frames": None if error is None else int(diverged(error, thresholds).sum()),
         "root_speed_p999_m_s": _round(np.percentile(series["root_speed_m_s"], 99.9)),
         "human_root_speed_p999_m_s": None if human_speed is None else _round(np.percentile(human_speed, 99.9)),
-        "planted_foot_turn_p95_deg": _planted_turn_p95(planted_turn),
+        "planted_foot_turn_p95_deg": _planted_turn_p95(foot_turn),
     }
 
 
@@ -312,10 +311,11 @@ def _planted_foot_turn(robot: Robot, reference: ReferenceMotion, foot_orientatio
 
 
 def _planted_turn_p95(turn: np.ndarray | None) -> float | None:
-    """p95 of the planted-foot turn; 0.0 for a clip that never plants a foot."""
+    """p95 of the planted-foot turn over the frames that plant a foot; 0.0 for a clip that never does."""
     if turn is None:
         return None
-    return _round(np.percentile(turn, 95.0)) if turn.size else 0.0
+    planted = turn[~np.isnan(turn)]
+    return _round(np.percentile(planted, 95.0)) if planted.size else 0.0
 
 
 def _gradient(values: np.ndarray, dt: float) -> np.ndarray:
