@@ -1,5 +1,5 @@
 """Leg targets a robot can reach: its own stance width, crossed legs opened, the body lowered where a
-planted leg is too short."""
+leg is too short for its foot."""
 
 from __future__ import annotations
 
@@ -63,20 +63,21 @@ def keep_legs_reachable(
     fraction: float,
     smoothing_s: float,
 ) -> None:
-    """Lower the body (not the feet) where a planted foot would need a leg longer than the robot's.
+    """Lower the body (not the feet) where a foot would need a leg longer than the robot's.
 
-    The drop is a smooth cover of the per-frame requirement, so it adds no jerk.
+    The hip is brought along the leg towards the foot until the leg fits, and the body drops by
+    the vertical part of that move: by the whole excess under a vertical leg, by little under a leg
+    stretched out along the floor (a lunge, sitting, lying), continuously in between. Dropping
+    straight down until the leg fits would instead ask a nearly horizontal leg for the body's whole
+    height, pushing the hands and trunk of a lying or lunging body through the floor. The drop is a
+    smooth cover of the per-frame requirement, so it adds no jerk.
     """
     need = np.zeros(targets[PELVIS].shape[0])
     for hip, foot in zip(HIPS_LR, FEET):
         reach = fraction * np.linalg.norm(rest[hip] - rest[foot])  # legs are straight in the rest pose
         delta = targets[hip] - targets[foot]
-        horizontal = np.linalg.norm(delta[:, :2], axis=1)
-        # Lowering only helps a leg that is too long vertically; a leg stretched out along the
-        # floor (sitting, lying) stays out of reach however low the body goes.
-        reachable = horizontal < reach
-        height = np.sqrt(reach**2 - np.minimum(horizontal, reach) ** 2)
-        need = np.maximum(need, np.where(reachable, delta[:, 2] - height, 0.0))
+        length = np.maximum(np.linalg.norm(delta, axis=1), reach)
+        need = np.maximum(need, delta[:, 2] * (1.0 - reach / length))
     drop = smooth_cover(np.maximum(need, 0.0), fps, smoothing_s)
     for joint in targets:
         # A knee sits between a lowered hip and a foot that stays: it comes down about half as far.

@@ -31,7 +31,7 @@ class TargetShaping:
     swing_lift_time_s: float = 0.1
     """Time a swing foot takes to rise to its clearance before it travels (and to come down after)."""
     reach_fraction: float = 0.97
-    """Fraction of the straight-leg length a planted leg may use; beyond it the body is lowered."""
+    """Fraction of the straight-leg length a leg may use; beyond it the body is lowered (`keep_legs_reachable`)."""
     min_stance_fraction: float = 0.6
     """Feet never come sideways closer than this fraction of the robot's rest stance (crossed legs are opened)."""
     leg_correction_smoothing_s: float = 0.1
