@@ -39,24 +39,12 @@ def plot_balancing(stats: SegmentStats, prior: BalancedPrior, path: Path) -> Non
     for k, (ax, joint) in enumerate(zip(axes[0], stats.selected)):
         edges = stats.bin_edges[k]
         width = np.diff(edges)
-        ax.bar(
-            edges[:-1],
-            prior.marginal_before[k],
-            width=width,
-            align="edge",
-            color="tab:blue",
-            alpha=0.5,
-            label="before balancing",
+        marginals = (
+            (prior.marginal_before[k], "tab:blue", "before balancing"),
+            (prior.marginal_after[k], "tab:red", "after balancing"),
         )
-        ax.bar(
-            edges[:-1],
-            prior.marginal_after[k],
-            width=width,
-            align="edge",
-            color="tab:red",
-            alpha=0.5,
-            label="after balancing",
-        )
+        for marginal, color, label in marginals:
+            ax.bar(edges[:-1], marginal, width=width, align="edge", color=color, alpha=0.5, label=label)
         ax.set_title(joint.replace("_joint", ""), fontsize=8)
         ax.set_xlabel("rad", fontsize=7)
         ax.tick_params(labelsize=7)
