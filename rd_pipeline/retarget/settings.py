@@ -97,7 +97,7 @@ class IkWeights:
     feet_orientation: float = 5.0
     """Feet orientation (planted soles flat, or tilted as the human's). Higher keeps soles flatter but
     fights the legs: at 10, on the nine shared takes, feet slide more, joints jerk more and H1's dance
-    frames diverge (bench/results/retarget.md)."""
+    frames diverge (bench/results/retarget.md at 781a982, against the table before it)."""
     limb_position: float = 0.5
     """Knees, hips, shoulders, elbows and hands."""
     contact_position: float = 20.0
