@@ -1,15 +1,25 @@
 """Leg shaping: how far the body is lowered where a leg is too short for its foot.
 
 Hand-built targets for one leg (the other stands straight under its hip, in reach), constant over
-a second, so the smooth cover of the drop equals the per-frame requirement.
+a second, so the smooth cover of the drop equals the per-frame requirement; then the real take
+where lowering went wrong.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
+from conftest import LAFAN_DIR
 
+from rd_pipeline.evaluation.retarget_quality import FootMeshes
+from rd_pipeline.motion.bvh import read_bvh
+from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
 from rd_pipeline.retarget.legs import keep_legs_reachable
+from rd_pipeline.retarget.settings import RetargetParams
+from rd_pipeline.retarget.targets import build_targets
+from rd_pipeline.robots import load_robot
 
 FPS = 50.0
 FRAMES = 50
@@ -73,3 +83,19 @@ def test_the_drop_is_continuous_across_the_horizontal_reach() -> None:
     inside = -_lowered((REACH_M - 0.001, 0.0, 0.3))["Hips"][0, 2]
     outside = -_lowered((REACH_M + 0.001, 0.0, 0.3))["Hips"][0, 2]
     assert abs(inside - outside) < 1e-3
+
+
+def test_a_body_lying_on_its_side_keeps_its_trunk_targets_above_the_floor() -> None:
+    """fallAndGetUp3 62-70 s: the human lies on its left side, one leg stretched out, hips 0.09 m or
+    more above the floor. Lowering straight down put the G1's pelvis target under the floor and its
+    left hip 0.14 m under it."""
+    human = human_motion_from_bvh(read_bvh(LAFAN_DIR / "fallAndGetUp3_subject1.bvh"), LAFAN_CM_TO_M, LAFAN_TO_Z_UP)
+    frames = slice(int(62.0 * human.fps), int(70.0 * human.fps))
+    human = dataclasses.replace(human, pos_w=human.pos_w[frames], quat_w=human.quat_w[frames])
+    robot = load_robot("g1")
+    params = RetargetParams()
+    feet = FootMeshes.from_robot(robot).vertices
+    targets = build_targets(human, robot, params.fps, feet, params.contact, params.shape, params.body_contact)
+    trunk = [targets.bodies.index(body) for body in ("pelvis", "left_hip_roll_link", "right_hip_roll_link")]
+    assert targets.human_pelvis[:, 2].min() < 0.1, "the excerpt should lie on the floor"
+    assert targets.positions[:, trunk, 2].min() > 0.0
