@@ -5,7 +5,8 @@
 
 Runs `rd-pipeline run` with `--resume` (an interrupted training continues from its last checkpoint;
 a finished one is cached), then writes `<out>.json` (`clip_s`, `start_zero_s`, `completion_pct`,
-`wall_min`, `samples`, the validation figures), and copies the learning curve, the sampler profile
+`wall_min`, `samples`, the validation figures of the exported checkpoint, which checkpoint that is and
+its start-zero survival on the training model beside the final one's), and copies the learning curve, the sampler profile
 and the validation report beside it.
 """
 
@@ -44,8 +45,10 @@ def main() -> None:
         sys.exit(1)
     trial = Trial(ROBOT, args.motion, args.seed, "long", sets)
     train = trial_artifact(trial, args.profile, "train")
+    export = trial_artifact(trial, args.profile, "export")
     validate = trial_artifact(trial, args.profile, "validate")
     manifest = json.loads((train / MANIFEST).read_text())
+    trained = manifest["metrics"]
     report = json.loads((validate / REPORT_JSON).read_text())
     policy = report["nominal"]["policy"]
     params = manifest["params"]
@@ -60,6 +63,9 @@ def main() -> None:
         "E_g_mpbpe": policy["fixed_grid"]["E_g_mpbpe"],
         "E_mpbpe": policy["fixed_grid"]["E_mpbpe"],
         "zero_action_start_zero_s": report["nominal"]["zero_action"]["start_zero"]["mean_survival_s"],
+        "checkpoint": json.loads((export / MANIFEST).read_text())["metrics"]["checkpoint_iteration"],
+        "training_model_start_zero_s": trained["best_start_zero_s"],
+        "final_checkpoint_training_model_start_zero_s": trained["final_start_zero_s"],
         "wall_min": round(training_seconds(train) / 60, 2),
         "samples": params["iterations"] * params["env"]["num_envs"] * params["ppo"]["steps_per_env"],
         "action_mode": params["env"]["actions"]["mode"],

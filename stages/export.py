@@ -17,7 +17,8 @@ class ExportParams:
     """Which checkpoint goes to the robot."""
 
     checkpoint: int = 0
-    """Training iteration of the checkpoint to export (0: the last one)."""
+    """Training iteration of the checkpoint to export (0: the one `train` scored best: the longest
+    start-zero survival on nominal physics, then the highest completion, then the latest)."""
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
@@ -36,7 +37,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     checkpoints = checkpoints_by_iteration(train.path)
     if not checkpoints:
         raise PipelineError(f"{train.path}: the training artifact has no checkpoints")
-    iteration = ctx.params.checkpoint or max(checkpoints)
+    iteration = ctx.params.checkpoint or train.manifest["metrics"]["best_checkpoint"]
     if iteration not in checkpoints:
         raise PipelineError(f"export.checkpoint {iteration}: no such checkpoint (have {sorted(checkpoints)})")
     metrics, params = manifest["metrics"], manifest["params"]
@@ -78,7 +79,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="export",
-    version=3,
+    version=4,
     description="trained actor -> policy.pt (TorchScript) + policy.json (gains, scales, mask, obs layout, rates)",
     params=ExportParams,
     provides="deployable_policy",

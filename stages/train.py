@@ -37,6 +37,10 @@ class TrainParams:
     """Seeds torch, the environment and the sampler."""
     clip: str = ""
     """Train on part of the motion, `START:END` in seconds (empty: all of it)."""
+    scoring_starts: int = 8
+    """Start frames, evenly spaced over the clip from frame 0, from which each checkpoint is rolled out
+    with its mean action on nominal physics; `export` takes the best-scored checkpoint (late PPO
+    updates can knock back a policy that had learned the clip)."""
     env: EnvConfig = EnvConfig()
     """Environment."""
     ppo: PpoConfig = PpoConfig()
@@ -45,7 +49,7 @@ class TrainParams:
     """Segment sampler."""
 
     def __post_init__(self) -> None:
-        require_positive(self, "iterations", "checkpoint_every")
+        require_positive(self, "iterations", "checkpoint_every", "scoring_starts")
 
 
 def clip_frames(clip: str, fps: float, n_frames: int, warn: Callable[[str], None] = print) -> tuple[int, int]:
@@ -77,11 +81,13 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
     from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
     from rd_pipeline.rl.env import TrackingEnv
+    from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal
     from rd_pipeline.rl.ppo import build_ppo
     from rd_pipeline.rl.rewards import GROUPS
     from rd_pipeline.rl.trainer import (
         CHECKPOINT_DIR,
         LOG_FILE,
+        best_checkpoint,
         checkpoint_path,
         checkpoints_by_iteration,
         load_checkpoint,
@@ -109,6 +115,10 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     env = TrackingEnv(robot, reference, sampler, starts, lengths, p.env, seed=p.seed)
     ppo = build_ppo(env.get_observations(), env.num_envs, env.num_actions, len(GROUPS), p.ppo, p.env.device)
     observation_size = int(env.get_observations()["policy"].shape[1])
+    scoring_sampler = SegmentSampler(p.sampler, balanced, seed=p.seed)
+    scoring_config = nominal(p.env, p.scoring_starts)
+    scoring_env = TrackingEnv(robot, reference, scoring_sampler, starts, lengths, scoring_config, seed=p.seed)
+    mean_action = lambda obs: ppo.actor(obs, stochastic_output=False)
     # Checkpoints and the log live in the work folder, which survives an interruption; --resume
     # continues from its newest checkpoint, and a fresh run starts it over.
     work = ctx.work_dir or ctx.out_dir
@@ -145,8 +155,10 @@ def _run(ctx: StageContext) -> dict[str, Any]:
             on_iteration=lambda row: advance(
                 f"reward {row['reward']:.2f}  episode {row['episode_length_s'] or 0:.2f} s"
             ),
+            score=checkpoint_scorer(scoring_env, mean_action),
         )
     env.close()
+    scoring_env.close()
     rows = [json.loads(line) for line in (work / LOG_FILE).read_text().splitlines()]
     if work != ctx.out_dir:
         for item in work.iterdir():
@@ -160,6 +172,8 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         ctx.out_dir / PROFILE_FILE,
     )
     last = rows[-1]
+    best = best_checkpoint(rows)
+    best_row = next(row for row in rows if row["iteration"] == best)
     continued = ctx.out_dir / CONTINUED_FILE
     return {
         "iterations": p.iterations,
@@ -170,6 +184,10 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         "num_actions": env.num_actions,
         "final_episode_length_s": last["episode_length_s"],
         "final_reward": last["reward"],
+        "final_start_zero_s": last["start_zero_s"],
+        "best_checkpoint": best,
+        "best_start_zero_s": best_row["start_zero_s"],
+        "best_completion": best_row["completion"],
         "samples_per_s_median": float(np.median([r["samples_per_s"] for r in rows])),
         "sampler_step": sampler.step,
     }
@@ -183,13 +201,13 @@ def _longest_shorter_run(runs: tuple[ArtifactRef, ...], iterations: int) -> Arti
 
 STAGE = Stage(
     name="train",
-    version=3,
+    version=4,
     description="reference + prior -> residual-action PPO policy (multi-head critic, segment sampler)",
     params=TrainParams,
     provides="policy",
     run=_run,
     inputs=lambda robot, motion: model_files(robot),
     requires=("reference", "sampling_prior"),
-    headline=("iterations", "final_episode_length_s", "samples_per_s_median"),
+    headline=("iterations", "best_checkpoint", "best_start_zero_s", "samples_per_s_median"),
     extends=("iterations",),
 )

@@ -55,3 +55,23 @@ def cli(*args: str, env: dict[str, str] | None = None, cwd: Path | None = None) 
         cwd=cwd or PROJECT,
         timeout=600,
     )
+
+
+def h1_2_dance_env(config, seed: int = 3):
+    """A tracking environment on H1-2 dance2_subject4 (dataset CSV), one-second segments, uniform sampler."""
+    import torch
+
+    from rd_pipeline.motion.contact import ContactThresholds
+    from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+    from rd_pipeline.rl.env import TrackingEnv
+    from rd_pipeline.robots import load_robot
+    from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
+    from rd_pipeline.sampling.segments import segment_bounds
+
+    robot = load_robot("h1_2")
+    reference = import_retargeted_csv(
+        RETARGETED_DIR / "h1_2" / "dance2_subject4.csv", robot, 30.0, 50.0, "cubic", ContactThresholds()
+    ).reference
+    starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
+    sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=seed)
+    return TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=seed)

@@ -9,33 +9,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import RETARGETED_DIR, cli
+from conftest import cli, h1_2_dance_env
 
 from rd_pipeline.artifacts.stage import build_params
-from rd_pipeline.motion.contact import ContactThresholds
-from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.params import parse_assignments
-from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.ppo import build_ppo
 from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
 from rd_pipeline.rl.trainer import load_checkpoint, train
-from rd_pipeline.robots import load_robot
-from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
-from rd_pipeline.sampling.segments import segment_bounds
 from rd_pipeline.stages import REGISTRY
 
 
 def _setup(seed: int = 3, config: EnvConfig = EnvConfig(num_envs=4, threads=2)):
     torch.manual_seed(seed)
-    robot = load_robot("h1_2")
-    reference = import_retargeted_csv(
-        RETARGETED_DIR / "h1_2" / "dance2_subject4.csv", robot, 30.0, 50.0, "cubic", ContactThresholds()
-    ).reference
-    starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
-    sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=seed)
-    env = TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=seed)
+    env = h1_2_dance_env(config, seed)
     ppo = build_ppo(env.get_observations(), env.num_envs, env.num_actions, len(GROUPS), PpoConfig(steps_per_env=6))
     return env, ppo
 
@@ -133,6 +121,14 @@ def test_smoke_profile_runs_the_dag_to_export(robot: str, motion: str, artifacts
     action = json.loads((exported / "policy.json").read_text())["action"]
     assert action["mode"] == "selective"
     assert len(action["outputs"]) == {"g1": 23, "h1": 19, "h1_2": 21}[robot] == metrics["num_actions"]
+    # Both checkpoints are scored; export takes the best-scored one, not simply the last.
+    log = [json.loads(line) for line in (folder / "training_log.jsonl").read_text().splitlines()]
+    scores = {row["iteration"]: (row["start_zero_s"], row["completion"]) for row in log}
+    assert metrics["best_checkpoint"] == max(scores, key=lambda it: (*scores[it], it))
+    assert (
+        json.loads((exported / "manifest.json").read_text())["metrics"]["checkpoint_iteration"]
+        == metrics["best_checkpoint"]
+    )
     residual = [joint for joint, kind in zip(action["outputs"], action["semantics"]) if kind == "residual"]
     assert sorted(residual) == sorted(
         f"{side}_{joint}_joint" for side in ("left", "right") for joint in ("hip_pitch", "knee")

@@ -46,3 +46,29 @@ def zero_action(num_actions: int) -> Callable[[TensorDict], torch.Tensor]:
     """Zero actions: the reference fed straight to PD on residual joints, the default pose on
     absolute ones (so, with `all`, the reference itself)."""
     return lambda obs: torch.zeros(obs.batch_size[0], num_actions)
+
+
+def scoring_starts(n_frames: int, count: int) -> torch.Tensor:
+    """`count` start frames evenly spaced over a motion of `n_frames`, frame 0 first."""
+    return torch.arange(count) * (n_frames // count)
+
+
+def checkpoint_scorer(env: TrackingEnv, policy: Callable[[TensorDict], torch.Tensor]) -> Callable[[], dict[str, float]]:
+    """Scores the policy as it is when called: start-zero survival (s) and completion (the mean
+    fraction of the motion left that it survives) from one start per environment of `env`, a
+    nominal environment of its own. Each call starts the environment over from its state when the
+    scorer was made (curricula, sigmas, generator), so a checkpoint's score depends on its weights alone."""
+    fresh = env.state_dict()
+    starts = scoring_starts(env.max_episode_length, env.num_envs)
+    # The last frame ends an episode, so from frame f the most there is to survive is n - 1 - f steps.
+    left_s = (env.max_episode_length - 1 - starts) / 50.0
+
+    def score() -> dict[str, float]:
+        env.load_state_dict(fresh)
+        seconds = survival(env, policy, starts)
+        return {
+            "start_zero_s": round(float(seconds[0]), 2),
+            "completion": round(float((seconds / left_s).clamp(max=1.0).mean()), 4),
+        }
+
+    return score

@@ -30,6 +30,16 @@ def checkpoints_by_iteration(folder: Path) -> dict[int, Path]:
     return dict(sorted(found.items()))
 
 
+def best_checkpoint(rows: list[dict]) -> int | None:
+    """The iteration of the best-scored checkpoint in a training log: the longest start-zero survival,
+    then the highest completion, then the latest; None when no row has a score."""
+    scored = [row for row in rows if "start_zero_s" in row]
+    if not scored:
+        return None
+    best = max(scored, key=lambda row: (row["start_zero_s"], row["completion"], row["iteration"]))
+    return best["iteration"]
+
+
 def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, env: TrackingEnv) -> None:
     """Written beside its final name and renamed, so an interrupted save never leaves a torn checkpoint."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -72,9 +82,11 @@ def train(
     checkpoint_every: int,
     start_iteration: int = 0,
     on_iteration: Callable[[dict], None] = lambda row: None,
+    score: Callable[[], dict[str, float]] | None = None,
 ) -> list[dict]:
     """Run PPO from `start_iteration` to `iterations`, checkpointing every `checkpoint_every` and at the end.
 
+    `score`, if given, rates the policy at each checkpoint; its figures go into that iteration's log row.
     Returns the logged rows of this call (the log file also holds those of earlier, resumed runs)."""
     history: list[dict] = []
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -113,12 +125,15 @@ def train(
             "motion_far_m": round(env.curriculum.motion_far_m, 4),
             "penalty_scale": round(env.curriculum.penalty_scale, 4),
         }
+        done = iteration + 1
+        checkpoint = done % checkpoint_every == 0 or done == iterations
+        if checkpoint and score is not None:
+            row.update(score())
         history.append(row)
         log.write(json.dumps(row) + "\n")
         log.flush()
         on_iteration(row)
-        done = iteration + 1
-        if done % checkpoint_every == 0 or done == iterations:
+        if checkpoint:
             save_checkpoint(checkpoint_path(out_dir, done), done, ppo, env)
     log.close()
     return history
@@ -147,13 +162,15 @@ def _logged_iteration(line: str) -> float:
 
 
 def plot_learning_curve(rows: list[dict], path: Path) -> None:
+    """Reward per group and episode length per iteration, and each checkpoint's start-zero survival
+    with the best-scored one marked."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     it = [r["iteration"] for r in rows]
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
+    fig, axes = plt.subplots(1, 3, figsize=(14, 3.2))
     for g in GROUPS:
         axes[0].plot(it, [r[f"reward_{g}"] for r in rows], label=g, lw=1)
     axes[0].set_xlabel("iteration")
@@ -162,6 +179,15 @@ def plot_learning_curve(rows: list[dict], path: Path) -> None:
     axes[1].plot(it, [r["episode_length_s"] or 0 for r in rows], lw=1)
     axes[1].set_xlabel("iteration")
     axes[1].set_ylabel("mean episode length (s)")
+    scored = [r for r in rows if "start_zero_s" in r]
+    axes[2].plot([r["iteration"] for r in scored], [r["start_zero_s"] for r in scored], "o-", lw=1, ms=3)
+    best = best_checkpoint(rows)
+    if best is not None:
+        chosen = next(r for r in scored if r["iteration"] == best)
+        axes[2].plot([best], [chosen["start_zero_s"]], "r*", ms=12, label=f"best: {best}")
+        axes[2].legend(fontsize=7)
+    axes[2].set_xlabel("checkpoint iteration")
+    axes[2].set_ylabel("start-zero survival, nominal (s)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

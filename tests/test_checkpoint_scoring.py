@@ -1,0 +1,75 @@
+"""Checkpoint scoring: a checkpoint's score is its own nominal survival, and scoring leaves training untouched."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import torch
+from conftest import h1_2_dance_env
+
+from rd_pipeline.rl.actions import ActionConfig
+from rd_pipeline.rl.env_config import EnvConfig
+from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal, scoring_starts, survival, zero_action
+from rd_pipeline.rl.ppo import MultiHeadPPO, build_ppo
+from rd_pipeline.rl.ppo_config import PpoConfig
+from rd_pipeline.rl.rewards import GROUPS
+from rd_pipeline.rl.trainer import best_checkpoint, checkpoint_path, train
+
+# With every joint residual, the zero action is the reference itself: a policy that stands a while.
+CONFIG = EnvConfig(num_envs=4, threads=2, actions=ActionConfig(mode="all"))
+
+
+def test_a_score_is_the_survival_from_evenly_spaced_starts_and_sees_a_falling_policy() -> None:
+    env = h1_2_dance_env(nominal(CONFIG, 4))
+    score = checkpoint_scorer(env, zero_action(env.num_actions))
+    first = score()
+    # The rollouts moved the curricula and the generator; the next call starts over from the same state.
+    assert score() == first
+    independent = h1_2_dance_env(nominal(CONFIG, 4))
+    starts = scoring_starts(independent.max_episode_length, 4)
+    quarter = independent.max_episode_length // 4
+    assert starts.tolist() == [0, quarter, 2 * quarter, 3 * quarter]
+    seconds = survival(independent, zero_action(independent.num_actions), starts)
+    left = (independent.max_episode_length - 1 - starts) / 50.0
+    assert first["start_zero_s"] == round(float(seconds[0]), 2)
+    assert first["completion"] == pytest.approx(float((seconds / left).mean()), abs=1e-4)
+    # The reference fed straight to PD stands 0.72 s from frame 0 of this dance.
+    assert 0.3 < first["start_zero_s"] < 3.0
+    # Joints driven to a far, fixed pose topple the robot sooner: the score must fall with it.
+    falling = checkpoint_scorer(h1_2_dance_env(nominal(CONFIG, 4)), lambda obs: torch.full((4, env.num_actions), 3.0))()
+    assert falling["start_zero_s"] < first["start_zero_s"]
+    assert falling["completion"] < first["completion"]
+
+
+def _mean_action(ppo: MultiHeadPPO):
+    return lambda obs: ppo.actor(obs, stochastic_output=False)
+
+
+def _train(out_dir: Path, scored: bool) -> tuple[MultiHeadPPO, list[dict]]:
+    torch.manual_seed(3)
+    env = h1_2_dance_env(CONFIG)
+    ppo = build_ppo(env.get_observations(), 4, env.num_actions, len(GROUPS), PpoConfig(steps_per_env=6))
+    scorer = checkpoint_scorer(h1_2_dance_env(nominal(CONFIG, 4)), _mean_action(ppo)) if scored else None
+    train(env, ppo, iterations=3, out_dir=out_dir, checkpoint_every=2, score=scorer)
+    rows = [json.loads(line) for line in (out_dir / "training_log.jsonl").read_text().splitlines()]
+    return ppo, rows
+
+
+@pytest.mark.slow
+def test_scoring_at_checkpoints_leaves_training_bit_for_bit_and_scores_the_saved_weights(tmp_path: Path) -> None:
+    plain, plain_rows = _train(tmp_path / "plain", scored=False)
+    scored, rows = _train(tmp_path / "scored", scored=True)
+    for name, value in scored.actor.state_dict().items():
+        assert torch.equal(value, plain.actor.state_dict()[name]), name
+    # Checkpoints at 2 and at the end (3) are scored, iteration 1 is not.
+    assert ["start_zero_s" in row for row in rows] == [False, True, True]
+    assert best_checkpoint(plain_rows) is None
+    # The score logged at iteration 2 is that of the weights saved at 2, rolled out afresh.
+    saved = torch.load(checkpoint_path(tmp_path / "scored", 2), weights_only=False)
+    env = h1_2_dance_env(CONFIG)
+    ppo = build_ppo(env.get_observations(), 4, env.num_actions, len(GROUPS), PpoConfig(steps_per_env=6))
+    ppo.load(saved["algorithm"], None, strict=True)
+    rescored = checkpoint_scorer(h1_2_dance_env(nominal(CONFIG, 4)), _mean_action(ppo))()
+    assert rescored == {key: rows[1][key] for key in ("start_zero_s", "completion")}
