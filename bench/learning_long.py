@@ -6,7 +6,7 @@
 Runs `rd-pipeline run` with `--resume` (an interrupted training continues from its last checkpoint;
 a finished one is cached), then writes `<out>.json` (`clip_s`, `start_zero_s`, `completion_pct`,
 `wall_min`, `samples`, the validation figures of the exported checkpoint, which checkpoint that is and
-its start-zero survival on the training model beside the final one's), and copies the learning curve, the sampler profile
+its start-zero survival on the training model beside the final one's and every checkpoint's), and copies the learning curve, the sampler profile
 and the validation report beside it.
 """
 
@@ -22,6 +22,7 @@ from pathlib import Path
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.commands import training_seconds, trial_artifact
 from rd_pipeline.evaluation.report import REPORT_JSON, REPORT_MD
+from rd_pipeline.rl.trainer import LOG_FILE
 from rd_pipeline.stages.train import CURVE_FILE, PROFILE_FILE
 from rd_pipeline.sweeps.runner import Trial
 
@@ -71,6 +72,11 @@ def main() -> None:
         "action_mode": params["env"]["actions"]["mode"],
         "sampler": params["sampler"]["mode"],
         "train_key": manifest["key"],
+        "training_model_start_zero_s_by_checkpoint": {
+            row["iteration"]: row["start_zero_s"]
+            for row in map(json.loads, (train / LOG_FILE).read_text().splitlines())
+            if "start_zero_s" in row
+        },
         "export_key": report["policy_key"],
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
