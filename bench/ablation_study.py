@@ -12,7 +12,8 @@ store and an interrupted training continues from its last checkpoint, so rerunni
 command continues the study. After every trial it rewrites `<out>.json`, `<out>.md` and
 `<out>_curves.png` (default out: `bench/results/<study>_study`) from the artifacts of the trials
 finished so far. Validation figures come from each trial's `validate` report (the exported policy on
-the full mesh model); a seed's wall time is its train stage's. The report ends with the paper's
+the full mesh model; each seed's row says which checkpoint export took); a seed's wall time is its
+train stage's. The report ends with the paper's
 findings judged on the seeds: supported, contradicted or undecided by Welch's 95% interval of the
 difference between the two arms.
 """
@@ -141,8 +142,9 @@ def run(trial: Trial, args: argparse.Namespace) -> bool:
 def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
     """One seed's row, or None while its trial has not finished."""
     train = trial_artifact(trial, args.profile, "train")
+    export = trial_artifact(trial, args.profile, "export")
     validate = trial_artifact(trial, args.profile, "validate")
-    if train is None or validate is None:
+    if train is None or export is None or validate is None:
         return None
     report = json.loads((validate / REPORT_JSON).read_text())["nominal"]["policy"]
     manifest = json.loads((train / MANIFEST).read_text())
@@ -151,6 +153,7 @@ def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
         "seed": trial.seed,
         "start_zero_s": report["start_zero"]["mean_survival_s"],
         **{m: report["fixed_grid"][m] for m in SPECS[args.study].columns[1:]},
+        "checkpoint": json.loads((export / MANIFEST).read_text())["metrics"]["checkpoint_iteration"],
         "wall_min": round(training_seconds(train) / 60, 2),
         "samples": params["iterations"] * params["env"]["num_envs"] * params["ppo"]["steps_per_env"],
         "train_key": manifest["key"],
