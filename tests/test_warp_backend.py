@@ -68,6 +68,7 @@ def test_ppo_trains_through_the_warp_backend(tmp_path) -> None:
 
     from rd_pipeline.rl.env import TrackingEnv
     from rd_pipeline.rl.env_config import EnvConfig
+    from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal
     from rd_pipeline.rl.ppo import build_ppo
     from rd_pipeline.rl.ppo_config import PpoConfig
     from rd_pipeline.rl.rewards import GROUPS
@@ -87,10 +88,15 @@ def test_ppo_trains_through_the_warp_backend(tmp_path) -> None:
     assert env.backend.state.qpos.device.type == "cpu" and env.num_actions == 23
     ppo = build_ppo(env.get_observations(), env.num_envs, env.num_actions, len(GROUPS), PpoConfig(steps_per_env=8))
     before = {k: v.clone() for k, v in ppo.actor.state_dict().items()}
-    train(env, ppo, iterations=3, out_dir=tmp_path, checkpoint_every=3)
+    # The checkpoint is scored in a nominal environment on the same backend.
+    scoring_env = TrackingEnv(robot, reference, sampler, starts, lengths, nominal(config, 2), seed=0)
+    score = checkpoint_scorer(scoring_env, lambda obs: ppo.actor(obs, stochastic_output=False))
+    train(env, ppo, iterations=3, out_dir=tmp_path, checkpoint_every=3, score=score)
     rows = [json.loads(line) for line in (tmp_path / "training_log.jsonl").read_text().splitlines()]
     assert [row["iteration"] for row in rows] == [1, 2, 3]
+    assert 0.0 < rows[-1]["start_zero_s"] < 4.98 and 0.0 < rows[-1]["completion"] < 1.0
     assert all(np.isfinite(row["reward"]) and np.isfinite(row["loss_value"]) for row in rows)
     assert any(not torch.equal(v, before[k]) for k, v in ppo.actor.state_dict().items())  # it learned something
     assert (tmp_path / "checkpoints" / "model_3.pt").is_file()
     env.close()
+    scoring_env.close()

@@ -32,14 +32,15 @@ def survival(
     """(E,) seconds survived from each start frame (one environment per start), until failure or the motion end."""
     env.reset(torch.arange(env.num_envs), frames=start_frames)
     obs = env.get_observations()
-    alive = torch.ones(env.num_envs, dtype=torch.bool)
-    steps = torch.zeros(env.num_envs)
+    # The done flags live on the simulation's device (a GPU with the warp backend).
+    alive = torch.ones(env.num_envs, dtype=torch.bool, device=env.device)
+    steps = torch.zeros(env.num_envs, device=env.device)
     with torch.inference_mode():
         while alive.any():
             obs, _, dones, extras = env.step(policy(obs))
             steps += alive.float()
             alive &= ~dones
-    return steps / 50.0
+    return steps.cpu() / 50.0
 
 
 def zero_action(num_actions: int) -> Callable[[TensorDict], torch.Tensor]:
