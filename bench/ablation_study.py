@@ -35,7 +35,7 @@ from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.commands import training_seconds, trial_artifact
 from rd_pipeline.evaluation.metrics import ERROR_METRICS, t_interval
 from rd_pipeline.evaluation.report import REPORT_JSON
-from rd_pipeline.rl.trainer import LOG_FILE, checkpoints_by_iteration
+from rd_pipeline.rl.trainer import checkpoints_by_iteration, read_training_log
 from rd_pipeline.stages.train import PROFILE_FILE
 from rd_pipeline.sweeps.ablation import STUDIES, format_cell
 from rd_pipeline.sweeps.findings import PAPER_RESAMPLING, PAPER_TABLE_R5, RESIDUAL_CLAIMS, SAMPLER_CLAIMS, Claim, judge
@@ -159,7 +159,7 @@ def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
         "train_key": manifest["key"],
         "train_folder": str(train),
     }
-    rows = [json.loads(line) for line in (train / LOG_FILE).read_text().splitlines()]
+    rows = read_training_log(train)
     # Logs of runs resumed before the trainer dropped the rows past the checkpoint repeat them
     # (identically: training is deterministic); each iteration counts once.
     log = list({row["iteration"]: row for row in rows}.values())

@@ -23,7 +23,7 @@ from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.params import layered_params
 from rd_pipeline.paths import artifacts_dir
 from rd_pipeline.rl.env import TrackingEnv
-from rd_pipeline.rl.evaluate import nominal, survival, zero_action
+from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal, survival, zero_action
 from rd_pipeline.rl.ppo import build_ppo
 from rd_pipeline.rl.rewards import GROUPS
 from rd_pipeline.rl.trainer import CHECKPOINT_DIR, checkpoints_by_iteration
@@ -68,13 +68,14 @@ def main() -> None:
     rows = {"clip_s": reference.n_frames / 50.0, "zero_action_survival_s": zero, "checkpoints": {}}
     # Either the training folder or its checkpoints folder.
     folder = args.checkpoints if (args.checkpoints / CHECKPOINT_DIR).is_dir() else args.checkpoints.parent
+    # Scored as `train` scores them, from frame 0 alone: the environment starts over for each.
+    env = make_env()
+    ppo = build_ppo(env.get_observations(), 1, env.num_actions, len(GROUPS), params.ppo)
+    ppo.eval_mode()
+    score = checkpoint_scorer(env, lambda obs: ppo.actor(obs, stochastic_output=False))
     for path in checkpoints_by_iteration(folder).values():
-        env = make_env()
-        ppo = build_ppo(env.get_observations(), 1, env.num_actions, len(GROUPS), params.ppo)
         ppo.load(torch.load(path, weights_only=False)["algorithm"], None, strict=True)
-        ppo.eval_mode()
-        mean_action = lambda obs, ppo=ppo: ppo.actor(obs, stochastic_output=False)
-        rows["checkpoints"][path.stem] = float(survival(env, mean_action, torch.tensor([0]))[0])
+        rows["checkpoints"][path.stem] = score()["start_zero_s"]
         print(path.stem, rows["checkpoints"][path.stem], flush=True)
     best = max(rows["checkpoints"].values())
     rows["best_policy_survival_s"] = best

@@ -22,7 +22,7 @@ from pathlib import Path
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.commands import training_seconds, trial_artifact
 from rd_pipeline.evaluation.report import REPORT_JSON, REPORT_MD
-from rd_pipeline.rl.trainer import LOG_FILE
+from rd_pipeline.rl.trainer import read_training_log
 from rd_pipeline.stages.train import CURVE_FILE, PROFILE_FILE
 from rd_pipeline.sweeps.runner import Trial
 
@@ -73,9 +73,7 @@ def main() -> None:
         "sampler": params["sampler"]["mode"],
         "train_key": manifest["key"],
         "training_model_start_zero_s_by_checkpoint": {
-            row["iteration"]: row["start_zero_s"]
-            for row in map(json.loads, (train / LOG_FILE).read_text().splitlines())
-            if "start_zero_s" in row
+            row["iteration"]: row["start_zero_s"] for row in read_training_log(train) if "start_zero_s" in row
         },
         "export_key": report["policy_key"],
     }

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -87,11 +86,12 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.rl.trainer import (
         CHECKPOINT_DIR,
         LOG_FILE,
-        best_checkpoint,
+        best_scored,
         checkpoint_path,
         checkpoints_by_iteration,
         load_checkpoint,
         plot_learning_curve,
+        read_training_log,
         train,
     )
     from rd_pipeline.robots import load_robot
@@ -159,7 +159,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         )
     env.close()
     scoring_env.close()
-    rows = [json.loads(line) for line in (work / LOG_FILE).read_text().splitlines()]
+    rows = read_training_log(work)
     if work != ctx.out_dir:
         for item in work.iterdir():
             shutil.move(str(item), ctx.out_dir / item.name)
@@ -172,8 +172,8 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         ctx.out_dir / PROFILE_FILE,
     )
     last = rows[-1]
-    best = best_checkpoint(rows)
-    best_row = next(row for row in rows if row["iteration"] == best)
+    # The last iteration is always a scored checkpoint, so there is a best one.
+    best = best_scored(rows)
     continued = ctx.out_dir / CONTINUED_FILE
     return {
         "iterations": p.iterations,
@@ -185,9 +185,9 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         "final_episode_length_s": last["episode_length_s"],
         "final_reward": last["reward"],
         "final_start_zero_s": last["start_zero_s"],
-        "best_checkpoint": best,
-        "best_start_zero_s": best_row["start_zero_s"],
-        "best_completion": best_row["completion"],
+        "best_checkpoint": best["iteration"],
+        "best_start_zero_s": best["start_zero_s"],
+        "best_completion": best["completion"],
         "samples_per_s_median": float(np.median([r["samples_per_s"] for r in rows])),
         "sampler_step": sampler.step,
     }

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pytest
@@ -15,7 +14,7 @@ from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal, scoring_starts, 
 from rd_pipeline.rl.ppo import MultiHeadPPO, build_ppo
 from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.trainer import best_checkpoint, checkpoint_path, train
+from rd_pipeline.rl.trainer import best_scored, checkpoint_path, read_training_log, train
 
 # With every joint residual, the zero action is the reference itself: a policy that stands a while.
 CONFIG = EnvConfig(num_envs=4, threads=2, actions=ActionConfig(mode="all"))
@@ -53,8 +52,7 @@ def _train(out_dir: Path, scored: bool) -> tuple[MultiHeadPPO, list[dict]]:
     ppo = build_ppo(env.get_observations(), 4, env.num_actions, len(GROUPS), PpoConfig(steps_per_env=6))
     scorer = checkpoint_scorer(h1_2_dance_env(nominal(CONFIG, 4)), _mean_action(ppo)) if scored else None
     train(env, ppo, iterations=3, out_dir=out_dir, checkpoint_every=2, score=scorer)
-    rows = [json.loads(line) for line in (out_dir / "training_log.jsonl").read_text().splitlines()]
-    return ppo, rows
+    return ppo, read_training_log(out_dir)
 
 
 @pytest.mark.slow
@@ -65,7 +63,7 @@ def test_scoring_at_checkpoints_leaves_training_bit_for_bit_and_scores_the_saved
         assert torch.equal(value, plain.actor.state_dict()[name]), name
     # Checkpoints at 2 and at the end (3) are scored, iteration 1 is not.
     assert ["start_zero_s" in row for row in rows] == [False, True, True]
-    assert best_checkpoint(plain_rows) is None
+    assert best_scored(plain_rows) is None
     # The score logged at iteration 2 is that of the weights saved at 2, rolled out afresh.
     saved = torch.load(checkpoint_path(tmp_path / "scored", 2), weights_only=False)
     env = h1_2_dance_env(CONFIG)

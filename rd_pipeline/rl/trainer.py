@@ -30,14 +30,16 @@ def checkpoints_by_iteration(folder: Path) -> dict[int, Path]:
     return dict(sorted(found.items()))
 
 
-def best_checkpoint(rows: list[dict]) -> int | None:
-    """The iteration of the best-scored checkpoint in a training log: the longest start-zero survival,
-    then the highest completion, then the latest; None when no row has a score."""
+def read_training_log(folder: Path) -> list[dict]:
+    """The rows of a training folder's log, one per iteration, oldest first."""
+    return [json.loads(line) for line in (folder / LOG_FILE).read_text().splitlines()]
+
+
+def best_scored(rows: list[dict]) -> dict | None:
+    """The log row of the best-scored checkpoint: the longest start-zero survival, then the highest
+    completion, then the latest; None when no row has a score."""
     scored = [row for row in rows if "start_zero_s" in row]
-    if not scored:
-        return None
-    best = max(scored, key=lambda row: (row["start_zero_s"], row["completion"], row["iteration"]))
-    return best["iteration"]
+    return max(scored, key=lambda row: (row["start_zero_s"], row["completion"], row["iteration"]), default=None)
 
 
 def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, env: TrackingEnv) -> None:
@@ -181,10 +183,9 @@ def plot_learning_curve(rows: list[dict], path: Path) -> None:
     axes[1].set_ylabel("mean episode length (s)")
     scored = [r for r in rows if "start_zero_s" in r]
     axes[2].plot([r["iteration"] for r in scored], [r["start_zero_s"] for r in scored], "o-", lw=1, ms=3)
-    best = best_checkpoint(rows)
+    best = best_scored(rows)
     if best is not None:
-        chosen = next(r for r in scored if r["iteration"] == best)
-        axes[2].plot([best], [chosen["start_zero_s"]], "r*", ms=12, label=f"best: {best}")
+        axes[2].plot([best["iteration"]], [best["start_zero_s"]], "r*", ms=12, label=f"best: {best['iteration']}")
         axes[2].legend(fontsize=7)
     axes[2].set_xlabel("checkpoint iteration")
     axes[2].set_ylabel("start-zero survival, nominal (s)")
