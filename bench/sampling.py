@@ -55,7 +55,7 @@ def main() -> None:
             torch.rand(64, generator=sampler.generator, dtype=torch.float64)
             < torch.as_tensor(fail_probability)[segments]
         )
-        sampler.record(segments, failed)
+        sampler.record(segments, segments, failed)
         sampler.advance(100)
     probability = sampler.probabilities().numpy()
     plot = args.out.with_name("sampler_profile.png")

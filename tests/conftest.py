@@ -57,8 +57,9 @@ def cli(*args: str, env: dict[str, str] | None = None, cwd: Path | None = None) 
     )
 
 
-def h1_2_dance_env(config, seed: int = 3):
-    """A tracking environment on H1-2 dance2_subject4 (dataset CSV), one-second segments, uniform sampler."""
+def h1_2_dance_env(config, seed: int = 3, sampler_config=None):
+    """A tracking environment on H1-2 dance2_subject4 (dataset CSV), one-second segments, the
+    sampler of `sampler_config` (the default one when not given) on a flat balanced prior."""
     import torch
 
     from rd_pipeline.motion.contact import ContactThresholds
@@ -73,5 +74,5 @@ def h1_2_dance_env(config, seed: int = 3):
         RETARGETED_DIR / "h1_2" / "dance2_subject4.csv", robot, 30.0, 50.0, "cubic", ContactThresholds()
     ).reference
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
-    sampler = SegmentSampler(SamplerConfig(), torch.ones(len(starts)), seed=seed)
+    sampler = SegmentSampler(sampler_config or SamplerConfig(), torch.ones(len(starts)), seed=seed)
     return TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=seed)

@@ -13,6 +13,7 @@ from conftest import LAFAN_DIR, PROJECT, RETARGETED_DIR, cli
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
+from rd_pipeline.rl.trainer import read_training_log
 from rd_pipeline.stages.train import clip_frames
 
 CSV_RUN = ("run", "--robot", "h1_2", "--motion", "dance2_subject4", "--until", "stats")
@@ -49,8 +50,7 @@ def test_two_runs_of_one_key_started_together_both_succeed(artifacts: Path) -> N
     assert [run.returncode for run in runs] == [0, 0], errors
     train = artifacts / "train" / "g1" / "dance1_subject2"
     (key,) = list(train.iterdir())  # one artifact, no work, temporary or lock entries left behind
-    rows = (key / "training_log.jsonl").read_text().splitlines()
-    assert [json.loads(row)["iteration"] for row in rows] == [1, 2, 3, 4]
+    assert [row["iteration"] for row in read_training_log(key)] == [1, 2, 3, 4]
     # One run did the training, the other waited for it and took its artifact.
     assert sum("run    train" in e for e in errors) == 1
     assert sum("cached train" in e for e in errors) == 1

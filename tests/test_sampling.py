@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import RETARGETED_DIR, cli
+from conftest import RETARGETED_DIR, cli, h1_2_dance_env
 
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.prior import flatness, solve_balanced_prior
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler, water_fill
@@ -77,13 +78,59 @@ def test_sampler_cap_with_a_concentrated_failure(stats: SegmentStats) -> None:
     prior = solve_balanced_prior(stats.histograms, stats.lengths, "CLARABEL")
     sampler = SegmentSampler(SamplerConfig(), torch.as_tensor(prior.weights), seed=0)
     for _ in range(40):  # one segment fails every time
-        sampler.record(torch.tensor([3, 3, 7]), torch.tensor([True, True, False]))
+        segments = torch.tensor([3, 3, 7])
+        sampler.record(segments, segments, torch.tensor([True, True, False]))
         sampler.advance(100)
     p = sampler.probabilities()
     cap = 4.0 / stats.n_segments
     assert p.sum().item() == pytest.approx(1.0)
     assert p.max().item() <= cap * (1 + 1e-9) and p[3].item() == pytest.approx(cap)
     assert sampler.failure_rate[3].item() == pytest.approx(1 - 0.95**40) and sampler.failure_rate[7] == 0
+
+
+def test_failure_credit_start_or_visited() -> None:
+    """Two episodes on ten segments: one from segment 2 failing in segment 5, one from segment 0
+    running to the end of the clip."""
+    start = torch.tensor([2, 0])
+    end = torch.tensor([5, 9])
+    failed = torch.tensor([True, False])
+    rates = {}
+    for credit in ("start", "visited"):
+        sampler = SegmentSampler(SamplerConfig(failure_credit=credit), torch.ones(10), seed=0)
+        sampler.record(start, end, failed)
+        if credit == "visited":
+            assert sampler.attempts.tolist() == [1, 1, 2, 2, 2, 2, 1, 1, 1, 1]
+        sampler.advance(100)
+        rates[credit] = sampler.failure_rate.tolist()
+    # `start`: the whole failure is held against the segment the episode began in.
+    assert rates["start"] == pytest.approx([0, 0, 0.05, 0, 0, 0, 0, 0, 0, 0])
+    # `visited`: against segment 5, which two episodes reached and one failed in.
+    assert rates["visited"] == pytest.approx([0, 0, 0, 0, 0, 0.025, 0, 0, 0, 0])
+
+
+def test_visited_credit_in_the_environment_follows_where_episodes_end() -> None:
+    """Zero actions on H1-2 dance2_subject4: the robot falls within about a second, from starts all
+    over the take. The sampler's counts equal those rebuilt from the environment's own frames: one
+    visit per segment from the start frame to the frame where the episode ended, the failure
+    against the last."""
+    credit = SamplerConfig(failure_credit="visited", update_interval=10**9)
+    env = h1_2_dance_env(EnvConfig(num_envs=16), sampler_config=credit)
+    segment_of = lambda frames: torch.searchsorted(env.segment_starts, frames, right=True) - 1
+    visits = torch.zeros(env.sampler.n_segments, dtype=torch.float64)
+    failures = torch.zeros(env.sampler.n_segments, dtype=torch.float64)
+    spans = []
+    for _ in range(120):
+        first = segment_of(env.start_frame.clone())
+        last = segment_of((env.frame + 1).clamp(max=env.max_episode_length - 1))
+        _, _, dones, extras = env.step(torch.zeros(env.num_envs, env.num_actions))
+        for i in torch.nonzero(dones).flatten().tolist():
+            visits[first[i] : last[i] + 1] += 1
+            failures[last[i]] += float(not extras["time_outs"][i])
+            spans.append(int(last[i] - first[i]) + 1)
+    assert len(spans) > 100 and failures.sum() > 100
+    assert max(spans) >= 2  # some episodes crossed a segment boundary
+    assert torch.equal(env.sampler.attempts, visits)
+    assert torch.equal(env.sampler.failures, failures)
 
 
 @pytest.mark.parametrize(
@@ -116,7 +163,7 @@ def test_same_seed_same_samples_and_state_round_trip() -> None:
     balanced = torch.rand(50, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
     a, b = SegmentSampler(SamplerConfig(), balanced, seed=7), SegmentSampler(SamplerConfig(), balanced, seed=7)
     assert torch.equal(a.sample(4096), b.sample(4096))
-    a.record(torch.tensor([1, 2]), torch.tensor([True, False]))
+    a.record(torch.tensor([1, 2]), torch.tensor([1, 4]), torch.tensor([True, False]))
     a.advance(250)
     state = a.state_dict()
     c = SegmentSampler(SamplerConfig(), balanced, seed=99)

@@ -17,7 +17,7 @@ from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.ppo import build_ppo
 from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.trainer import load_checkpoint, train
+from rd_pipeline.rl.trainer import load_checkpoint, read_training_log, train
 from rd_pipeline.stages import REGISTRY
 
 
@@ -43,9 +43,10 @@ def test_resume_continues_bit_for_bit(tmp_path: Path) -> None:
     train(resumed_env, resumed_ppo, iterations=3, out_dir=tmp_path / "b", checkpoint_every=1, start_iteration=start)
     for name, value in resumed_ppo.actor.state_dict().items():
         assert torch.equal(value, straight[name]), name
-    read = lambda run: [json.loads(line) for line in (tmp_path / run / "training_log.jsonl").read_text().splitlines()]
-    assert [row["iteration"] for row in read("a")] == [1, 2, 3] and all(np.isfinite(row["reward"]) for row in read("a"))
-    assert [row["iteration"] for row in read("b")] == [1, 2, 3]
+    straight_log = read_training_log(tmp_path / "a")
+    assert [row["iteration"] for row in straight_log] == [1, 2, 3]
+    assert all(np.isfinite(row["reward"]) for row in straight_log)
+    assert [row["iteration"] for row in read_training_log(tmp_path / "b")] == [1, 2, 3]
 
 
 def test_zero_action_environment_tracks_and_terminates() -> None:
@@ -122,8 +123,7 @@ def test_smoke_profile_runs_the_dag_to_export(robot: str, motion: str, artifacts
     assert action["mode"] == "selective"
     assert len(action["outputs"]) == {"g1": 23, "h1": 19, "h1_2": 21}[robot] == metrics["num_actions"]
     # Both checkpoints are scored; export takes the best-scored one, not simply the last.
-    log = [json.loads(line) for line in (folder / "training_log.jsonl").read_text().splitlines()]
-    scores = {row["iteration"]: (row["start_zero_s"], row["completion"]) for row in log}
+    scores = {row["iteration"]: (row["start_zero_s"], row["completion"]) for row in read_training_log(folder)}
     assert metrics["best_checkpoint"] == max(scores, key=lambda it: (*scores[it], it))
     assert (
         json.loads((exported / "manifest.json").read_text())["metrics"]["checkpoint_iteration"]
@@ -181,8 +181,8 @@ def test_cli_resume_continues_an_interrupted_training(artifacts: Path) -> None:
     assert result.returncode == 0, result.stderr
     assert f"resuming from model_{saved}.pt" in result.stderr
     (done,) = [p for p in folder.iterdir() if not p.name.startswith(".")]
-    log = [json.loads(line)["iteration"] for line in (done / "training_log.jsonl").read_text().splitlines()]
-    assert log == list(range(1, 31))  # iterations logged after the last checkpoint are not repeated
+    logged = [row["iteration"] for row in read_training_log(done)]
+    assert logged == list(range(1, 31))  # iterations logged after the last checkpoint are not repeated
     assert not list(folder.glob(".work-*"))  # moved into the artifact
 
 
@@ -206,14 +206,13 @@ def test_a_longer_run_with_resume_continues_the_shorter_one_bit_for_bit(artifact
     scratch = cli(*args, "--force", "--set", "train.iterations=4", "train.checkpoint_every=1")
     assert scratch.returncode == 0 and "continuing" not in scratch.stderr
     assert sorted(p.name for p in (short / "checkpoints").iterdir()) == ["model_1.pt", "model_2.pt"]
-    log = lambda run: [json.loads(line) for line in (run / "training_log.jsonl").read_text().splitlines()]
     timing = ("seconds", "samples_per_s")
     strip = lambda rows: [{k: v for k, v in row.items() if k not in timing} for row in rows]
-    assert [row["iteration"] for row in log(tmp_path / "grown")] == [1, 2, 3, 4]
+    assert [row["iteration"] for row in read_training_log(tmp_path / "grown")] == [1, 2, 3, 4]
     metrics = lambda run: json.loads((run / "manifest.json").read_text())["metrics"]
     assert metrics(tmp_path / "grown")["continued_from"] == short.name
     assert metrics(grown)["continued_from"] is None
-    assert strip(log(tmp_path / "grown")) == strip(log(grown))
+    assert strip(read_training_log(tmp_path / "grown")) == strip(read_training_log(grown))
     a = torch.load(tmp_path / "grown" / "checkpoints" / "model_4.pt", weights_only=False)
     b = torch.load(grown / "checkpoints" / "model_4.pt", weights_only=False)
     for name, value in a["algorithm"]["actor_state_dict"].items():

@@ -64,15 +64,13 @@ def test_warp_backend_matches_c_mujoco_on_a_short_rollout() -> None:
 def test_ppo_trains_through_the_warp_backend(tmp_path) -> None:
     """A few PPO iterations end to end with physics in MuJoCo Warp (on Warp's CPU device here, on
     a GPU in the `paper` profile): the same environment, state as torch tensors from Warp."""
-    import json
-
     from rd_pipeline.rl.env import TrackingEnv
     from rd_pipeline.rl.env_config import EnvConfig
     from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal
     from rd_pipeline.rl.ppo import build_ppo
     from rd_pipeline.rl.ppo_config import PpoConfig
     from rd_pipeline.rl.rewards import GROUPS
-    from rd_pipeline.rl.trainer import train
+    from rd_pipeline.rl.trainer import read_training_log, train
     from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
     from rd_pipeline.sampling.segments import segment_bounds
 
@@ -92,7 +90,7 @@ def test_ppo_trains_through_the_warp_backend(tmp_path) -> None:
     scoring_env = TrackingEnv(robot, reference, sampler, starts, lengths, nominal(config, 2), seed=0)
     score = checkpoint_scorer(scoring_env, lambda obs: ppo.actor(obs, stochastic_output=False))
     train(env, ppo, iterations=3, out_dir=tmp_path, checkpoint_every=3, score=score)
-    rows = [json.loads(line) for line in (tmp_path / "training_log.jsonl").read_text().splitlines()]
+    rows = read_training_log(tmp_path)
     assert [row["iteration"] for row in rows] == [1, 2, 3]
     assert 0.0 < rows[-1]["start_zero_s"] < 4.98 and 0.0 < rows[-1]["completion"] < 1.0
     assert all(np.isfinite(row["reward"]) and np.isfinite(row["loss_value"]) for row in rows)

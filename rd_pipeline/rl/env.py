@@ -122,6 +122,7 @@ class TrackingEnv:
         # Episode bookkeeping lives on the host beside the random generator and the sampler: resets,
         # pushes and curricula then read one transfer per step, the done flags.
         self.start_segment = torch.zeros(n, dtype=torch.long)
+        self.start_frame = torch.zeros(n, dtype=torch.long)
         self.episode_length_buf = torch.zeros(n, dtype=torch.long)
         self.action_history = torch.zeros(n, 3, self.num_actions, dtype=DTYPE, device=device)
         queue = config.randomization.max_delay_steps + 1
@@ -154,6 +155,7 @@ class TrackingEnv:
             self.config, self.ref, frames, model.nq, model.nv, self.qpos_idx, self.dof_idx, self.joint_range, self.rng
         )
         self.start_segment[host_ids] = segments
+        self.start_frame[host_ids] = frames
         self.episode_length_buf[host_ids] = 0
         device_ids = host_ids.to(self.device)
         self.backend.set_state(device_ids, qpos, qvel)
@@ -228,9 +230,11 @@ class TrackingEnv:
         flags = torch.stack([terminated, time_out]).cpu()
         failed = flags[0]
         done_ids = torch.nonzero(flags.any(0)).flatten()
-        self.sampler.record(self.start_segment[done_ids], failed[done_ids])
-        self.sampler.advance(1)
         lengths = self.episode_length_buf[done_ids]
+        end_frames = (self.start_frame[done_ids] + lengths).clamp(max=self.max_episode_length - 1)
+        end_segments = torch.searchsorted(self.segment_starts, end_frames, right=True) - 1
+        self.sampler.record(self.start_segment[done_ids], end_segments, failed[done_ids])
+        self.sampler.advance(1)
         extras = {
             "time_outs": time_out & ~terminated,
             "log": {f"reward/{k}": v.mean() for k, v in terms.items()},
@@ -324,6 +328,7 @@ class TrackingEnv:
             "physics": self.backend.get_states(),
             "frame": self.frame.clone(),
             "start_segment": self.start_segment.clone(),
+            "start_frame": self.start_frame.clone(),
             "episode_length": self.episode_length_buf.clone(),
             "action_history": self.action_history.clone(),
             "target_queue": self.target_queue.clone(),
@@ -342,6 +347,7 @@ class TrackingEnv:
         self.backend.set_states(state["physics"])
         self.frame = device("frame")
         self.start_segment = host("start_segment")
+        self.start_frame = host("start_frame")
         self.episode_length_buf = host("episode_length")
         self.action_history = device("action_history")
         self.target_queue = device("target_queue")

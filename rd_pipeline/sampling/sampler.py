@@ -20,6 +20,8 @@ torch = lazy_import("torch")
 SamplerMode = Literal["uniform", "distribution", "failure", "combined"]
 MODES: tuple[str, ...] = get_args(SamplerMode)
 
+FailureCredit = Literal["start", "visited"]
+
 
 @dataclass(frozen=True)
 class SamplerConfig:
@@ -49,6 +51,12 @@ class SamplerConfig:
     """Prioritization strength beta."""
     update_interval: int = 100
     """Steps between failure-statistics updates."""
+    failure_credit: FailureCredit = "start"
+    """Which segments a finished episode counts for. `start`: the segment it started in, failed or
+    not. `visited`: one visit for each segment it passed through and the failure for the segment
+    it failed in, so r_s is the chance of failing within segment s once there. Episodes run until
+    they fail or the clip ends, so on a clip much longer than they last nearly every start fails
+    sooner or later: `start` then flattens r_s near 1 and p_fail cannot single out the hard part."""
     cap_factor: float = 4.0
     """p_max as a multiple of the uniform probability 1/S."""
 
@@ -117,17 +125,26 @@ class SegmentSampler:
         """(count,) segment indices, drawn with the sampler's own generator (same seed, same draws)."""
         return torch.multinomial(self.probabilities(), count, replacement=True, generator=self.generator)
 
-    def record(self, segments: torch.Tensor, failed: torch.Tensor) -> None:
-        """Outcomes of finished episodes: the segment each started in and whether it failed."""
-        ones = torch.ones_like(segments, dtype=torch.float64)
-        self.attempts.index_add_(0, segments, ones)
-        self.failures.index_add_(0, segments, failed.to(torch.float64))
+    def record(self, start: torch.Tensor, end: torch.Tensor, failed: torch.Tensor) -> None:
+        """Outcomes of finished episodes: the segments each started and ended in, and whether it failed."""
+        ones = torch.ones_like(start, dtype=torch.float64)
+        if self.config.failure_credit == "start":
+            self.attempts.index_add_(0, start, ones)
+            self.failures.index_add_(0, start, failed.to(torch.float64))
+            return
+        # Each episode visited every segment from its start to its end: a difference array turns
+        # those ranges into per-segment counts.
+        edges = torch.zeros(self.n_segments + 1, dtype=torch.float64)
+        edges.index_add_(0, start, ones)
+        edges.index_add_(0, end + 1, -ones)
+        self.attempts += edges.cumsum(0)[:-1]
+        self.failures.index_add_(0, end, failed.to(torch.float64))
 
     def advance(self, steps: int = 1) -> None:
         """Count environment steps; every `update_interval` steps, fold the outcomes into the EMA.
 
-        f_s is the failure fraction of the episodes that segment s saw in the interval; segments
-        with no episodes keep their rate.
+        f_s is the failure fraction of the episodes that segment s counted in the interval (see
+        `failure_credit`); segments with no episodes keep their rate.
         """
         for _ in range(steps):
             self.step += 1
