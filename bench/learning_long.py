@@ -4,10 +4,12 @@
         [--set stage.param=value ...] [--out bench/results/learning_30s]
 
 Runs `rd-pipeline run` with `--resume` (an interrupted training continues from its last checkpoint;
-a finished one is cached), then writes `<out>.json` (`clip_s`, `start_zero_s`, `completion_pct`,
-`wall_min`, `samples`, the validation figures of the exported checkpoint, which checkpoint that is and
-its start-zero survival on the training model beside the final one's and every checkpoint's), and copies the learning curve, the sampler profile
-and the validation report beside it.
+a finished one is cached), then writes `<out>.json`: `clip_s`, `start_zero_s`, `completion_pct`,
+`wall_min` (with the minutes of each run a grown training continued), `samples`, the validation
+figures of the exported checkpoint, which checkpoint that is and its start-zero survival on the
+training model beside the final one's and every checkpoint's, the survival from each fixed-grid start
+beside zero action's, and how fast the reference moves in each second. It copies the learning curve,
+the sampler profile, the survival per start and the validation report beside it.
 """
 
 from __future__ import annotations
@@ -19,14 +21,25 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from rd_pipeline.artifacts.store import MANIFEST
-from rd_pipeline.commands import training_seconds, trial_artifact
-from rd_pipeline.evaluation.report import REPORT_JSON, REPORT_MD
+from rd_pipeline.commands import training_runs, training_seconds, trial_artifact
+from rd_pipeline.evaluation.report import REPORT_JSON, REPORT_MD, SURVIVAL_PLOT
+from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.rl.trainer import read_training_log
 from rd_pipeline.stages.train import CURVE_FILE, PROFILE_FILE
 from rd_pipeline.sweeps.runner import Trial
 
 ROBOT = "g1"
+
+
+def joint_speed_p95_per_second(reference: ReferenceMotion) -> list[float]:
+    """How much the reference moves in each second: the 95th percentile of |joint velocity| (rad/s)."""
+    window = round(reference.fps)
+    speeds = np.abs(reference.joint_vel)
+    starts = range(0, reference.n_frames, window)
+    return [round(float(np.percentile(speeds[s : s + window], 95)), 2) for s in starts]
 
 
 def main() -> None:
@@ -51,6 +64,10 @@ def main() -> None:
     manifest = json.loads((train / MANIFEST).read_text())
     trained = manifest["metrics"]
     report = json.loads((validate / REPORT_JSON).read_text())
+    clip = report["reference"]
+    retarget = trial_artifact(trial, args.profile, "retarget")
+    reference = ReferenceMotion.load(retarget / REFERENCE_FILE).frames(clip["start_frame"], clip["end_frame"])
+    per_start = {name: report["nominal"][name]["per_start"] for name in ("policy", "zero_action")}
     policy = report["nominal"]["policy"]
     params = manifest["params"]
     result = {
@@ -68,6 +85,7 @@ def main() -> None:
         "training_model_start_zero_s": trained["best_start_zero_s"],
         "final_checkpoint_training_model_start_zero_s": trained["final_start_zero_s"],
         "wall_min": round(training_seconds(train) / 60, 2),
+        "wall_min_per_run": {key: round(seconds / 60, 2) for key, seconds in training_runs(train)},
         "samples": params["iterations"] * params["env"]["num_envs"] * params["ppo"]["steps_per_env"],
         "action_mode": params["env"]["actions"]["mode"],
         "sampler": params["sampler"]["mode"],
@@ -76,6 +94,10 @@ def main() -> None:
             row["iteration"]: row["start_zero_s"] for row in read_training_log(train) if "start_zero_s" in row
         },
         "export_key": report["policy_key"],
+        "fixed_grid_start_s": per_start["policy"]["start_s"],
+        "fixed_grid_survival_s": per_start["policy"]["survival_s"],
+        "fixed_grid_zero_action_survival_s": per_start["zero_action"]["survival_s"],
+        "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(reference),
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
@@ -83,6 +105,7 @@ def main() -> None:
         (train / CURVE_FILE, "_curve.png"),
         (train / PROFILE_FILE, "_sampler_profile.png"),
         (validate / REPORT_MD, "_validation.md"),
+        (validate / SURVIVAL_PLOT, "_survival_per_start.png"),
     ):
         shutil.copyfile(source, args.out.parent / f"{args.out.name}{suffix}")
     print(json.dumps(result, indent=2))

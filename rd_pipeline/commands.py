@@ -278,15 +278,22 @@ def trial_artifact(trial, profile: str | None, stage: str) -> Path | None:
     return found.path if found else None
 
 
-def training_seconds(train: Path) -> float:
-    """A train artifact's seconds, with those of the shorter runs a grown training continued."""
+def training_runs(train: Path) -> list[tuple[str, float]]:
+    """(key, seconds) of each run behind a train artifact, oldest first: a grown training continues
+    the shorter runs before it."""
     manifest = json.loads((train / MANIFEST).read_text())
+    this_run = (manifest["key"], manifest["duration_s"])
     earlier = manifest["metrics"].get("continued_from")
     if not earlier:
-        return manifest["duration_s"]
+        return [this_run]
     if not (train.parent / earlier / MANIFEST).is_file():
         raise PipelineError(f"{train}: continues run {earlier}, which is no longer in the store; its time is unknown")
-    return manifest["duration_s"] + training_seconds(train.parent / earlier)
+    return [*training_runs(train.parent / earlier), this_run]
+
+
+def training_seconds(train: Path) -> float:
+    """A train artifact's seconds, with those of the shorter runs a grown training continued."""
+    return sum(seconds for _, seconds in training_runs(train))
 
 
 def validation_report(trial, profile: str | None) -> Path | None:

@@ -92,7 +92,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     starts = np.arange(0, reference.n_frames - 1, max(1, round(p.protocol.grid_s * control_hz)))
     rng = np.random.default_rng(p.bootstrap_seed)
 
-    nominal, per_start, first = {}, {}, {}
+    nominal, first = {}, {}
     with ctx.progress(len(CONTROLLERS) * (1 + len(p.randomized_seeds)), "sim2sim rollouts") as advance:
         for name in CONTROLLERS:
             rollouts = run_rollouts(
@@ -102,8 +102,11 @@ def _run(ctx: StageContext) -> dict[str, Any]:
                 "fixed_grid": summarize(rollouts, control_hz),
                 "start_zero": summarize(rollouts[:1], control_hz),
                 "drift": drift(rollouts, rng),
+                "per_start": {
+                    "start_s": [r.start_frame / control_hz for r in rollouts],
+                    "survival_s": [r.steps / control_hz for r in rollouts],
+                },
             }
-            per_start[name] = [(r.start_frame / control_hz, r.steps / control_hz) for r in rollouts]
             first[name] = rollouts[0]
             advance(name)
         randomized: dict[str, Any] = {}
@@ -159,7 +162,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     }
     write_json(report, ctx.out_dir)
     write_markdown(report, ctx.out_dir)
-    plot_report(report, per_start, ctx.out_dir)
+    plot_report(report, ctx.out_dir)
     tracked = first["policy"]
     save_tracked(ctx.out_dir / TRACKED_FILE, tracked.body_pos, tracked.body_quat, start, reference.fps)
     record_tracking(
@@ -186,7 +189,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="validate",
-    version=3,
+    version=4,
     description="exported policy + reference -> sim2sim report (report.json/md, plots, .rrd) beside zero-action",
     params=ValidateParams,
     provides="validation_report",

@@ -146,6 +146,13 @@ def test_smoke_profile_trains_exports_and_validates(robot: str, motion: str, art
         assert grid["rollouts"] == report["protocol"]["starts"] > 100
         assert 0.2 < grid["mean_survival_s"] < 10 and grid["E_g_mpbpe"] > 0
         assert len(report["nominal"][controller]["drift"]) == 6
+        # Per start: the fixed grid's starts in order, their mean the grid's, the first start-zero's.
+        per_start = report["nominal"][controller]["per_start"]
+        grid_starts = [k * report["protocol"]["grid_s"] for k in range(grid["rollouts"])]
+        assert per_start["start_s"] == pytest.approx(grid_starts)
+        assert np.mean(per_start["survival_s"]) == pytest.approx(grid["mean_survival_s"], abs=0.005)
+        start_zero = report["nominal"][controller]["start_zero"]["mean_survival_s"]
+        assert per_start["survival_s"][0] == pytest.approx(start_zero, abs=0.005)
     for name in ("report.md", "drift.png", "survival_per_start.png", "sim2sim.rrd"):
         assert (validate / name).stat().st_size > 0, name
     assert "| zero_action |" in (validate / "report.md").read_text()

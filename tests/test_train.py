@@ -12,6 +12,7 @@ import torch
 from conftest import cli, h1_2_dance_env
 
 from rd_pipeline.artifacts.stage import build_params
+from rd_pipeline.commands import training_runs, training_seconds
 from rd_pipeline.params import parse_assignments
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.ppo import build_ppo
@@ -203,6 +204,11 @@ def test_a_longer_run_with_resume_continues_the_shorter_one_bit_for_bit(artifact
     assert f"continuing the 2-iteration run {short.name}" in longer.stderr
     (grown,) = [p for p in folder.iterdir() if not p.name.startswith(".") and p != short]
     shutil.copytree(grown, tmp_path / "grown")
+    runs = training_runs(grown)
+    assert [key for key, _ in runs] == [short.name, grown.name]
+    durations = [json.loads((run / "manifest.json").read_text())["duration_s"] for run in (short, grown)]
+    assert [seconds for _, seconds in runs] == durations
+    assert training_seconds(grown) == pytest.approx(sum(durations))
     scratch = cli(*args, "--force", "--set", "train.iterations=4", "train.checkpoint_every=1")
     assert scratch.returncode == 0 and "continuing" not in scratch.stderr
     assert sorted(p.name for p in (short / "checkpoints").iterdir()) == ["model_1.pt", "model_2.pt"]

@@ -100,7 +100,7 @@ def write_markdown(report: dict, out_dir: Path) -> None:
     (out_dir / REPORT_MD).write_text("\n".join(lines) + "\n")
 
 
-def plot_report(report: dict, per_start: dict[str, list[tuple[float, float]]], out_dir: Path) -> None:
+def plot_report(report: dict, out_dir: Path) -> None:
     """Drift with its CI band, and survival per fixed-grid start, policy beside the zero-action baseline."""
     import matplotlib
 
@@ -124,8 +124,9 @@ def plot_report(report: dict, per_start: dict[str, list[tuple[float, float]]], o
     fig, ax = plt.subplots(figsize=(6.5, 3.2))
     width = 0.4
     for offset, name in zip((-width / 2, width / 2), CONTROLLERS):
-        starts, seconds = zip(*per_start[name]) if per_start[name] else ((), ())
-        ax.bar([s + offset for s in starts], seconds, width=width, color=colors[name], label=name)
+        per_start = report["nominal"][name]["per_start"]
+        starts = [s + offset for s in per_start["start_s"]]
+        ax.bar(starts, per_start["survival_s"], width=width, color=colors[name], label=name)
     ax.set_xlabel("start time (s)")
     ax.set_ylabel("survival (s)")
     ax.legend(fontsize=8)

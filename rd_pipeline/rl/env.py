@@ -121,7 +121,6 @@ class TrackingEnv:
         self.frame = torch.zeros(n, dtype=torch.long, device=device)
         # Episode bookkeeping lives on the host beside the random generator and the sampler: resets,
         # pushes and curricula then read one transfer per step, the done flags.
-        self.start_segment = torch.zeros(n, dtype=torch.long)
         self.start_frame = torch.zeros(n, dtype=torch.long)
         self.episode_length_buf = torch.zeros(n, dtype=torch.long)
         self.action_history = torch.zeros(n, 3, self.num_actions, dtype=DTYPE, device=device)
@@ -148,13 +147,10 @@ class TrackingEnv:
             frames = frames.clamp(max=self.max_episode_length - 2)
         else:
             frames = frames.cpu()
-            segments = torch.searchsorted(self.segment_starts, frames, right=True) - 1
-            segments = segments.clamp(min=0)
         model = self.backend.models[0]
         qpos, qvel = events.rsi_state(
             self.config, self.ref, frames, model.nq, model.nv, self.qpos_idx, self.dof_idx, self.joint_range, self.rng
         )
-        self.start_segment[host_ids] = segments
         self.start_frame[host_ids] = frames
         self.episode_length_buf[host_ids] = 0
         device_ids = host_ids.to(self.device)
@@ -165,6 +161,10 @@ class TrackingEnv:
         self.target_queue[device_ids] = qpos[:, self.qpos_idx].to(DTYPE)[:, None]
         if self.obs_frames is not None:
             self.obs_frames[device_ids] = self._actor_frame()[device_ids, None]
+
+    def _segment_of(self, frames: torch.Tensor) -> torch.Tensor:
+        """The sampler segment each reference frame lies in."""
+        return (torch.searchsorted(self.segment_starts, frames, right=True) - 1).clamp(min=0)
 
     # -- observations ------------------------------------------------------------------------
     def _state(self) -> dict[str, torch.Tensor]:
@@ -232,8 +232,8 @@ class TrackingEnv:
         done_ids = torch.nonzero(flags.any(0)).flatten()
         lengths = self.episode_length_buf[done_ids]
         end_frames = (self.start_frame[done_ids] + lengths).clamp(max=self.max_episode_length - 1)
-        end_segments = torch.searchsorted(self.segment_starts, end_frames, right=True) - 1
-        self.sampler.record(self.start_segment[done_ids], end_segments, failed[done_ids])
+        start_segments = self._segment_of(self.start_frame[done_ids])
+        self.sampler.record(start_segments, self._segment_of(end_frames), failed[done_ids])
         self.sampler.advance(1)
         extras = {
             "time_outs": time_out & ~terminated,
@@ -327,7 +327,6 @@ class TrackingEnv:
         return {
             "physics": self.backend.get_states(),
             "frame": self.frame.clone(),
-            "start_segment": self.start_segment.clone(),
             "start_frame": self.start_frame.clone(),
             "episode_length": self.episode_length_buf.clone(),
             "action_history": self.action_history.clone(),
@@ -346,7 +345,6 @@ class TrackingEnv:
         host = lambda name: state[name].cpu().clone()
         self.backend.set_states(state["physics"])
         self.frame = device("frame")
-        self.start_segment = host("start_segment")
         self.start_frame = host("start_frame")
         self.episode_length_buf = host("episode_length")
         self.action_history = device("action_history")
