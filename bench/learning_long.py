@@ -23,10 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from rd_pipeline.artifacts.store import MANIFEST
+from rd_pipeline.artifacts.store import MANIFEST, ArtifactStore
 from rd_pipeline.commands import training_runs, training_seconds, trial_artifact
 from rd_pipeline.evaluation.report import REPORT_JSON, REPORT_MD, SURVIVAL_PLOT
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+from rd_pipeline.paths import artifacts_dir
 from rd_pipeline.rl.trainer import read_training_log
 from rd_pipeline.stages.train import CURVE_FILE, PROFILE_FILE
 from rd_pipeline.sweeps.runner import Trial
@@ -65,8 +66,9 @@ def main() -> None:
     trained = manifest["metrics"]
     report = json.loads((validate / REPORT_JSON).read_text())
     clip = report["reference"]
-    retarget = trial_artifact(trial, args.profile, "retarget")
-    reference = ReferenceMotion.load(retarget / REFERENCE_FILE).frames(clip["start_frame"], clip["end_frame"])
+    # The reference the report validated against, whichever stage made it (retarget or import).
+    source = ArtifactStore(artifacts_dir()).find(clip["stage"], ROBOT, args.motion, clip["key"])
+    reference = ReferenceMotion.load(source.path / REFERENCE_FILE).frames(clip["start_frame"], clip["end_frame"])
     per_start = {name: report["nominal"][name]["per_start"] for name in ("policy", "zero_action")}
     policy = report["nominal"]["policy"]
     params = manifest["params"]
