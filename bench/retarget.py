@@ -36,17 +36,13 @@ from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.robots import Robot, load_robot
 from rd_pipeline.stages.import_motion import ImportParams
 
-TAKES = [
-    "dance1_subject1",
-    "dance1_subject2",
-    "dance1_subject3",
-    "fallAndGetUp1_subject1",
-    "fallAndGetUp3_subject1",
-    "ground2_subject2",
-    "multipleActions1_subject1",
-    "obstacles1_subject1",
-    "pushAndFall1_subject1",
-]
+
+def shared_takes() -> list[str]:
+    """Every BVH take in `RD_LAFAN_DIR`, dances first: whatever the data folder holds today."""
+    names = [path.stem for path in paths.lafan_dir().glob("*.bvh")]
+    return sorted(names, key=lambda name: (not name.startswith("dance"), name))
+
+
 COLUMNS = {
     "fps_frames_per_s": "fps",
     "penetration_max_mm": "pen max",
@@ -81,7 +77,7 @@ BARS = {
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", nargs="+", default=["g1", "h1", "h1_2"])
-    parser.add_argument("--motions", nargs="+", default=TAKES)
+    parser.add_argument("--motions", nargs="+", default=shared_takes())
     parser.add_argument("--jobs", type=int, default=2, help="takes retargeted at once, each pinned to its own core")
     parser.add_argument("--resume", action="store_true", help="keep the rows already in <out>.jsonl")
     parser.add_argument("--out", type=Path, default=Path("bench/results/retarget"))

@@ -30,7 +30,7 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from retarget import TAKES, in_take_order, pending, resume_log, retarget_and_score  # bench/retarget.py
+from retarget import in_take_order, pending, resume_log, retarget_and_score, shared_takes  # bench/retarget.py
 
 from rd_pipeline import paths
 from rd_pipeline.motion.bvh import read_bvh
@@ -54,7 +54,7 @@ COLUMNS = {
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robots", nargs="+", default=["g1", "h1", "h1_2"])
-    parser.add_argument("--motions", nargs="+", default=TAKES)
+    parser.add_argument("--motions", nargs="+", default=shared_takes())
     parser.add_argument("--widen-rad", type=float, default=0.5, help="growth of every range at each end")
     parser.add_argument("--jobs", type=int, default=2, help="(robot, take) rows computed at once")
     parser.add_argument("--resume", action="store_true", help="keep the rows already in <out>.jsonl")

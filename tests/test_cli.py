@@ -6,7 +6,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
-from conftest import cli
+from conftest import LAFAN_DIR, RETARGETED_DIR, cli
 
 from rd_pipeline.profiles import PROFILES
 from rd_pipeline.stages import REGISTRY
@@ -25,11 +25,17 @@ def test_motions_lists_sources() -> None:
     result = cli("motions")
     assert result.returncode == 0
     table = {line.split()[0]: line.split()[1:] for line in result.stdout.splitlines()}
+    # The expected listing follows from the folders, whatever takes they hold.
+    expected: dict[str, list[str]] = {}
+    for bvh in sorted(LAFAN_DIR.glob("*.bvh")):
+        expected.setdefault(bvh.stem, []).append("bvh")
+    for csv in sorted(RETARGETED_DIR.glob("*/*.csv")):
+        expected.setdefault(csv.stem, []).append(f"csv:{csv.parent.name}")
+    assert table == expected
+    # Named takes: a dance with both sources, one with CSVs only, a non-dance take with BVH only.
     assert table["dance1_subject2"] == ["bvh", "csv:g1", "csv:h1", "csv:h1_2"]
     assert table["dance2_subject4"] == ["csv:g1", "csv:h1", "csv:h1_2"]
-    # 8 dances, and the BVH-only takes of other kinds (falls, floor work, obstacles, ...).
     assert table["fallAndGetUp1_subject1"] == ["bvh"]
-    assert len(table) == 14
 
 
 @pytest.mark.offline
