@@ -31,15 +31,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from rd_pipeline.api.ablation import STUDIES, format_cell
+from rd_pipeline.api.findings import PAPER_RESAMPLING, PAPER_TABLE_R5, RESIDUAL_CLAIMS, SAMPLER_CLAIMS, Claim, judge
+from rd_pipeline.api.sweeps import Trial, trial_artifact
+from rd_pipeline.api.workspace import training_seconds
 from rd_pipeline.artifacts.store import MANIFEST
-from rd_pipeline.commands import training_seconds, trial_artifact
 from rd_pipeline.evaluation.metrics import ERROR_METRICS, t_interval
 from rd_pipeline.evaluation.report import REPORT_JSON
-from rd_pipeline.rl.trainer import checkpoints_by_iteration, read_training_log
+from rd_pipeline.rl.training_log import checkpoints_by_iteration, read_training_log
 from rd_pipeline.stages.train import PROFILE_FILE
-from rd_pipeline.sweeps.ablation import STUDIES, format_cell
-from rd_pipeline.sweeps.findings import PAPER_RESAMPLING, PAPER_TABLE_R5, RESIDUAL_CLAIMS, SAMPLER_CLAIMS, Claim, judge
-from rd_pipeline.sweeps.runner import Trial
 
 ROBOT = "g1"
 CURVE_STATISTICS = ("early_episode_length_s", "late_episode_length_s", "late_reward")

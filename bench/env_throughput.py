@@ -36,10 +36,10 @@ from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig
+from rd_pipeline.rl.physics.rollout import CONTROL
 from rd_pipeline.rl.ppo import build_ppo
 from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.rollout_backend import CONTROL
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
 from rd_pipeline.sampling.segments import segment_bounds

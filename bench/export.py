@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from rd_pipeline.export.onnx_policy import ONNX_FILE, OnnxPolicy
-from rd_pipeline.export.policy_spec import POLICY_FILE, SPEC_FILE, load_policy_spec
+from rd_pipeline.evaluation.runtimes import OnnxPolicy
+from rd_pipeline.policy_spec import ONNX_FILE, POLICY_FILE, SPEC_FILE, load_policy_spec
 
 BLOCK = 100
 """Calls of one runtime before switching to the other."""

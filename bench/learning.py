@@ -12,25 +12,22 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from rd_pipeline.artifacts.runner import Pipeline, resolve_source
-from rd_pipeline.artifacts.store import ArtifactStore
+from rd_pipeline.api import workspace
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
-from rd_pipeline.params import layered_params
-from rd_pipeline.paths import artifacts_dir
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal, survival, zero_action
 from rd_pipeline.rl.ppo import build_ppo
 from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.trainer import CHECKPOINT_DIR, checkpoints_by_iteration
+from rd_pipeline.rl.training_config import TrainConfig, clip_frames
+from rd_pipeline.rl.training_log import CHECKPOINT_DIR, checkpoints_by_iteration
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SegmentSampler
-from rd_pipeline.stages import REGISTRY
-from rd_pipeline.stages.train import TrainParams, clip_frames
 
 
 def main() -> None:
@@ -45,14 +42,12 @@ def main() -> None:
     )
     parser.add_argument("--out", type=Path, default=Path("bench/results/learning.json"))
     args = parser.parse_args()
-    registry = {stage.name: stage for stage in REGISTRY}
-    values = layered_params(args.profile, list(registry), None, (f"train.clip={args.clip}", *args.set))
-    pipeline = Pipeline(REGISTRY, args.robot, args.motion, resolve_source(args.robot, args.motion, None), values)
-    planned = {entry.stage.name: entry for entry in pipeline.plan(pipeline.chain())}
-    params: TrainParams = planned["train"].params
-    reference_stage = next(s for s in ("retarget", "import") if s in planned)
-    folder = ArtifactStore(artifacts_dir()).find(reference_stage, args.robot, args.motion, planned[reference_stage].key)
-    reference = ReferenceMotion.load(folder.path / REFERENCE_FILE)
+    plan = workspace.plan(args.robot, args.motion, args.profile, overrides=(f"train.clip={args.clip}", *args.set))
+    params: TrainConfig = plan.stage("train").params
+    folder = workspace.artifact(plan, workspace.providing(plan, "reference"))
+    if folder is None:
+        sys.exit(f"no reference artifact for {args.robot}/{args.motion}: run `rd-pipeline run --until stats` first")
+    reference = ReferenceMotion.load(folder / REFERENCE_FILE)
     robot = load_robot(args.robot)
     start, end = clip_frames(params.clip, reference.fps, reference.n_frames)
     reference = reference.frames(start, end)
@@ -65,7 +60,7 @@ def main() -> None:
 
     env = make_env()
     zero = float(survival(env, zero_action(env.num_actions), torch.tensor([0]))[0])
-    rows = {"clip_s": reference.n_frames / 50.0, "zero_action_survival_s": zero, "checkpoints": {}}
+    rows = {"clip_s": reference.n_frames / reference.fps, "zero_action_survival_s": zero, "checkpoints": {}}
     # Either the training folder or its checkpoints folder.
     folder = args.checkpoints if (args.checkpoints / CHECKPOINT_DIR).is_dir() else args.checkpoints.parent
     # Scored as `train` scores them, from frame 0 alone: the environment starts over for each.

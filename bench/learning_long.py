@@ -3,7 +3,7 @@
     python bench/learning_long.py --clip 0:30 [--iterations 2800] [--motion dance1_subject2] \
         [--set stage.param=value ...] [--out bench/results/learning_30s]
 
-Runs `rd-pipeline run` with `--resume` (an interrupted training continues from its last checkpoint;
+Runs the pipeline (as `rd-pipeline run --resume` would) (an interrupted training continues from its last checkpoint;
 a finished one is cached), then writes `<out>.json`: `clip_s`, `start_zero_s`, `completion_pct`,
 `wall_min` (with the minutes of each run a grown training continued), `samples`, the validation
 figures of the exported checkpoint, which checkpoint that is and its start-zero survival on the
@@ -17,20 +17,20 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from rd_pipeline.artifacts.store import MANIFEST, ArtifactStore
-from rd_pipeline.commands import training_runs, training_seconds, trial_artifact
-from rd_pipeline.evaluation.report import REPORT_JSON, REPORT_MD, SURVIVAL_PLOT
+from rd_pipeline.api import workspace
+from rd_pipeline.api.workspace import training_runs, training_seconds
+from rd_pipeline.artifacts.store import MANIFEST
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.evaluation.report import REPORT_MD, SURVIVAL_PLOT
+from rd_pipeline.evaluation.validation import ValidationReport
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
-from rd_pipeline.paths import artifacts_dir
-from rd_pipeline.rl.trainer import read_training_log
+from rd_pipeline.rl.training_log import read_training_log
 from rd_pipeline.stages.train import CURVE_FILE, PROFILE_FILE
-from rd_pipeline.sweeps.runner import Trial
 
 ROBOT = "g1"
 
@@ -54,21 +54,22 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("bench/results/learning_30s"))
     args = parser.parse_args()
     sets = (f"train.clip={args.clip}", f"train.iterations={args.iterations}", *args.set)
-    command = [sys.executable, "-m", "rd_pipeline", "run", "--robot", ROBOT, "--motion", args.motion]
-    command += ["--profile", args.profile, "--seed", str(args.seed), "--resume", "--set", *sets]
-    if subprocess.run(command, check=False).returncode != 0:
-        sys.exit(1)
-    trial = Trial(ROBOT, args.motion, args.seed, "long", sets)
-    train = trial_artifact(trial, args.profile, "train")
-    export = trial_artifact(trial, args.profile, "export")
-    validate = trial_artifact(trial, args.profile, "validate")
+    try:
+        plan = workspace.plan(ROBOT, args.motion, args.profile, overrides=sets, seed=args.seed)
+        workspace.run(plan, resume=True)
+    except PipelineError as exc:
+        sys.exit(f"error: {exc}")
+    train = workspace.artifact(plan, "train")
+    export = workspace.artifact(plan, "export")
+    validate = workspace.artifact(plan, "validate")
     manifest = json.loads((train / MANIFEST).read_text())
     trained = manifest["metrics"]
-    report = json.loads((validate / REPORT_JSON).read_text())
+    validation = ValidationReport.load(validate)
+    report = validation.details
     clip = report["reference"]
     # The reference the report validated against, whichever stage made it (retarget or import).
-    source = ArtifactStore(artifacts_dir()).find(clip["stage"], ROBOT, args.motion, clip["key"])
-    reference = ReferenceMotion.load(source.path / REFERENCE_FILE).frames(clip["start_frame"], clip["end_frame"])
+    source = workspace.artifact(plan, clip["stage"])
+    reference = ReferenceMotion.load(source / REFERENCE_FILE).frames(clip["start_frame"], clip["end_frame"])
     per_start = {name: report["nominal"][name]["per_start"] for name in ("policy", "zero_action")}
     policy = report["nominal"]["policy"]
     params = manifest["params"]
@@ -77,12 +78,12 @@ def main() -> None:
         "motion": args.motion,
         "clip": args.clip,
         "clip_s": report["reference"]["duration_s"],
-        "start_zero_s": policy["start_zero"]["mean_survival_s"],
-        "completion_pct": policy["fixed_grid"]["completion_pct"],
-        "mean_survival_s": policy["fixed_grid"]["mean_survival_s"],
-        "E_g_mpbpe": policy["fixed_grid"]["E_g_mpbpe"],
+        "start_zero_s": validation.start_zero_survival_s,
+        "completion_pct": validation.completion_pct,
+        "mean_survival_s": validation.mean_survival_s,
+        "E_g_mpbpe": validation.E_g_mpbpe,
         "E_mpbpe": policy["fixed_grid"]["E_mpbpe"],
-        "zero_action_start_zero_s": report["nominal"]["zero_action"]["start_zero"]["mean_survival_s"],
+        "zero_action_start_zero_s": validation.zero_action_start_zero_survival_s,
         "checkpoint": json.loads((export / MANIFEST).read_text())["metrics"]["checkpoint_iteration"],
         "training_model_start_zero_s": trained["best_start_zero_s"],
         "final_checkpoint_training_model_start_zero_s": trained["final_start_zero_s"],

@@ -27,10 +27,10 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 
 from rd_pipeline import paths
-from rd_pipeline.evaluation.retarget_quality import retarget_quality
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+from rd_pipeline.retarget.quality import retarget_quality
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.robots import Robot, load_robot

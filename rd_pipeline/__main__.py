@@ -1,3 +1,3 @@
-from rd_pipeline.cli import entry_point
+from rd_pipeline.cli.app import entry_point
 
 entry_point()

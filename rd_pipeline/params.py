@@ -92,14 +92,38 @@ def parse_assignments(assignments: tuple[str, ...], stage_names: list[str]) -> d
 def layered_params(
     profile: str | None, stage_names: list[str], params_file: Path | None, assignments: tuple[str, ...]
 ) -> dict[str, dict[str, Any]]:
+    """Per-stage values of the profile, then the params file, then `--set`, merged field by field:
+    a later layer replaces only the fields it names, however deep (`train.env.num_envs` keeps the
+    profile's `train.env.backend`)."""
     file_profile, file_values = read_params_file(params_file, stage_names) if params_file else (None, {})
     layers = [
         load_profile(profile or file_profile or DEFAULT_PROFILE),
         file_values,
         parse_assignments(assignments, stage_names),
     ]
-    merged: dict[str, dict[str, Any]] = {}
+    merged: dict[str, Any] = {}
     for layer in layers:
-        for stage, values in layer.items():
-            merged.setdefault(stage, {}).update(values)
+        merge_into(merged, nested(layer))
     return merged
+
+
+def nested(values: dict[str, Any]) -> dict[str, Any]:
+    """The same values with every dotted name (`env.num_envs`, as `--set` gives them) spelled as
+    nested mappings (as profiles and params files give them)."""
+    result: dict[str, Any] = {}
+    for name, value in values.items():
+        head, *rest = name.split(".")
+        inner = nested(value) if isinstance(value, dict) else value
+        for part in reversed(rest):
+            inner = {part: inner}
+        merge_into(result, {head: inner})
+    return result
+
+
+def merge_into(target: dict[str, Any], values: dict[str, Any]) -> None:
+    """Merge nested `values` into `target` in place, mapping into mapping; anything else replaces."""
+    for name, value in values.items():
+        if isinstance(value, dict) and isinstance(target.get(name), dict):
+            merge_into(target[name], value)
+        else:
+            target[name] = value

@@ -26,10 +26,11 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     import torch
     from tensordict import TensorDict
 
+    from rd_pipeline.evaluation.runtimes import OnnxPolicy
     from rd_pipeline.export.exporter import build_policy_spec, load_actor, script_actor
-    from rd_pipeline.export.onnx_policy import ONNX_FILE, OnnxPolicy, export_onnx
-    from rd_pipeline.export.policy_spec import POLICY_FILE, SPEC_FILE, load_policy_spec
-    from rd_pipeline.rl.trainer import checkpoints_by_iteration
+    from rd_pipeline.export.onnx_policy import ONNX_FILE, export_onnx
+    from rd_pipeline.policy_spec import POLICY_FILE, SPEC_FILE, load_policy_spec
+    from rd_pipeline.rl.training_log import checkpoints_by_iteration
     from rd_pipeline.robots import load_robot
 
     train = ctx.upstream["policy"]

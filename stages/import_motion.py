@@ -43,14 +43,14 @@ def _inputs(robot: str | None, motion: str) -> dict[str, Path]:
 def _run(ctx: StageContext) -> dict[str, Any]:
     import numpy as np
 
-    from rd_pipeline.evaluation.retarget_quality import (
+    from rd_pipeline.motion.reference import REFERENCE_FILE
+    from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+    from rd_pipeline.retarget.quality import (
         QUALITY_FILE,
         QUALITY_SERIES_FILE,
         quality_series,
         summarize_quality,
     )
-    from rd_pipeline.motion.reference import REFERENCE_FILE
-    from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
     from rd_pipeline.robots import load_robot
 
     p = ctx.params

@@ -14,14 +14,14 @@ from rd_pipeline.robots.assets import model_files
 def _run(ctx: StageContext) -> dict[str, Any]:
     import numpy as np
 
-    from rd_pipeline.evaluation.retarget_quality import (
+    from rd_pipeline.motion.human import HUMAN_MOTION_FILE, HumanMotion
+    from rd_pipeline.motion.reference import REFERENCE_FILE
+    from rd_pipeline.retarget.quality import (
         QUALITY_FILE,
         QUALITY_SERIES_FILE,
         quality_series,
         summarize_quality,
     )
-    from rd_pipeline.motion.human import HUMAN_MOTION_FILE, HumanMotion
-    from rd_pipeline.motion.reference import REFERENCE_FILE
     from rd_pipeline.retarget.retarget import retarget
     from rd_pipeline.retarget.targets import TARGETS_FILE
     from rd_pipeline.robots import load_robot

@@ -14,7 +14,8 @@ from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal, scoring_starts, 
 from rd_pipeline.rl.ppo import MultiHeadPPO, build_ppo
 from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.trainer import best_scored, checkpoint_path, read_training_log, train
+from rd_pipeline.rl.trainer import train
+from rd_pipeline.rl.training_log import best_scored, checkpoint_path, read_training_log
 
 # With every joint residual, the zero action is the reference itself: a policy that stands a while.
 CONFIG = EnvConfig(num_envs=4, threads=2, actions=ActionConfig(mode="all"))

@@ -12,10 +12,10 @@ from conftest import LAFAN_DIR, cli
 from scipy.spatial.transform import Rotation
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.evaluation.retarget_quality import retarget_quality
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.contact import contact_runs
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
+from rd_pipeline.retarget.quality import retarget_quality
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.robots import load_robot
@@ -174,8 +174,8 @@ def test_lagging_windows_are_padded_merged_and_off_at_zero_ratio() -> None:
 def test_frames_visited_backward_get_their_own_task_costs() -> None:
     # The lag repair solves stretches backward: each frame must hold its own costs (planted or
     # swinging feet), not those of the frame visited before it.
-    from rd_pipeline.evaluation.retarget_quality import FootMeshes
     from rd_pipeline.retarget.ik import RetargetIk
+    from rd_pipeline.retarget.quality import FootMeshes
     from rd_pipeline.retarget.targets import build_targets
     from rd_pipeline.robots.hulls import BodyHulls
 

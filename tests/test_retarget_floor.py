@@ -15,9 +15,9 @@ import pytest
 from conftest import LAFAN_DIR
 from scipy.spatial.transform import Rotation
 
-from rd_pipeline.evaluation.retarget_quality import quality_series, summarize_quality
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
+from rd_pipeline.retarget.quality import quality_series, summarize_quality
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.retarget.settings import LagRepair, RetargetParams
 from rd_pipeline.robots import load_robot

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from conftest import LAFAN_DIR
 
-from rd_pipeline.evaluation.retarget_quality import FootMeshes
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
 from rd_pipeline.retarget.legs import keep_legs_reachable
+from rd_pipeline.retarget.quality import FootMeshes
 from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.retarget.targets import build_targets
 from rd_pipeline.robots import load_robot

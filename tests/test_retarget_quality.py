@@ -12,10 +12,10 @@ from conftest import RETARGETED_DIR
 from scipy.spatial.transform import Rotation
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.evaluation.retarget_quality import FootMeshes, QualityThresholds, quality_series, retarget_quality
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+from rd_pipeline.retarget.quality import FootMeshes, QualityThresholds, quality_series, retarget_quality
 from rd_pipeline.robots import Robot, load_robot
 from rd_pipeline.robots.hulls import BodyHulls
 from rd_pipeline.robots.model import collision_geoms

@@ -11,7 +11,7 @@ import torch
 
 from rd_pipeline.rl.actions import RESIDUAL_PRESETS, ActionConfig, ResidualActions, joint_semantics
 from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
-from rd_pipeline.rl.backend import MujocoCpuBackend
+from rd_pipeline.rl.physics import MujocoCpuBackend
 from rd_pipeline.rl.reward_terms import TermContext, TrackingState
 from rd_pipeline.rl.rewards import GROUPS, AdaptiveSigma, RewardManager, RewardsCfg
 from rd_pipeline.rl.sim_model import simulation_model

@@ -11,8 +11,8 @@ from conftest import RETARGETED_DIR
 
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.rl.backend import body_velocities
-from rd_pipeline.rl.rollout_backend import MujocoRolloutBackend
+from rd_pipeline.rl.physics import MujocoRolloutBackend
+from rd_pipeline.rl.physics.state import body_velocities
 from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
 

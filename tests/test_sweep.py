@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 from conftest import cli
 
-from rd_pipeline.commands import validation_report
-from rd_pipeline.sweeps.runner import Trial, run_sweep
+from rd_pipeline.api.sweeps import Trial, run_sweep, validation_report
 
 FAST = ("train.iterations=1", "train.clip=0:4")
 """One PPO iteration on 4 s of motion: 4 validation starts per trial."""
@@ -91,7 +90,7 @@ def test_difference_interval_is_welchs_and_exact_without_spread() -> None:
 
 
 def test_findings_are_judged_by_the_side_of_zero_their_interval_lies_on() -> None:
-    from rd_pipeline.sweeps.findings import Claim, judge
+    from rd_pipeline.api.findings import Claim, judge
 
     lower_error = Claim("SELECTIVE has a lower E_mpjpe than NONE", "E_mpjpe", "selective", "absolute", False)
     seeds = {

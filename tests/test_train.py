@@ -11,14 +11,15 @@ import pytest
 import torch
 from conftest import cli, h1_2_dance_env
 
+from rd_pipeline.api.workspace import training_runs, training_seconds
 from rd_pipeline.artifacts.stage import build_params
-from rd_pipeline.commands import training_runs, training_seconds
 from rd_pipeline.params import parse_assignments
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.ppo import build_ppo
 from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.trainer import load_checkpoint, read_training_log, train
+from rd_pipeline.rl.trainer import load_checkpoint, train
+from rd_pipeline.rl.training_log import read_training_log
 from rd_pipeline.stages import REGISTRY
 
 

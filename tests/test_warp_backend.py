@@ -11,7 +11,7 @@ from conftest import RETARGETED_DIR
 
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.rl.backend import MujocoCpuBackend
+from rd_pipeline.rl.physics import MujocoCpuBackend
 from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
 
@@ -24,7 +24,7 @@ float64 C. Measured: 5e-7."""
 
 
 def test_warp_backend_matches_c_mujoco_on_a_short_rollout() -> None:
-    from rd_pipeline.rl.warp_backend import MujocoWarpBackend
+    from rd_pipeline.rl.physics.warp import MujocoWarpBackend
 
     robot = load_robot("g1")
     reference = import_retargeted_csv(
@@ -70,7 +70,8 @@ def test_ppo_trains_through_the_warp_backend(tmp_path) -> None:
     from rd_pipeline.rl.ppo import build_ppo
     from rd_pipeline.rl.ppo_config import PpoConfig
     from rd_pipeline.rl.rewards import GROUPS
-    from rd_pipeline.rl.trainer import read_training_log, train
+    from rd_pipeline.rl.trainer import train
+    from rd_pipeline.rl.training_log import read_training_log
     from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
     from rd_pipeline.sampling.segments import segment_bounds
 

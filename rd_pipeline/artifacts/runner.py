@@ -14,10 +14,11 @@ from typing import Any
 from rich.console import Console
 
 from rd_pipeline import __version__, paths
-from rd_pipeline.artifacts.keys import artifact_key, canonical_json, file_sha256
+from rd_pipeline.artifacts.keys import artifact_key, canonical_json
 from rd_pipeline.artifacts.stage import Stage, StageContext, build_params
 from rd_pipeline.artifacts.store import ArtifactRef, ArtifactStore, file_records, write_manifest
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.files import file_sha256
 
 SOURCES = ("bvh", "csv")
 
@@ -38,6 +39,10 @@ class PlannedStage:
     """Upstream stage name -> key."""
     key: str
     """The artifact key."""
+
+    @property
+    def name(self) -> str:
+        return self.stage.name
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from rd_pipeline.artifacts.keys import file_sha256
+from rd_pipeline.files import file_sha256
 
 MANIFEST = "manifest.json"
 TEMP_PREFIX = ".tmp-"

@@ -14,8 +14,8 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
-from rd_pipeline.export.policy_spec import PolicySpec
 from rd_pipeline.motion.reference import ReferenceMotion
+from rd_pipeline.policy_spec import PolicySpec
 
 Policy = Callable[[np.ndarray], np.ndarray]
 """(R, observation_size) float32 -> (R, num_actions)."""

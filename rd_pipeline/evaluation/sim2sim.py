@@ -16,10 +16,10 @@ import torch
 
 from rd_pipeline.evaluation.deploy import DeployController, Policy
 from rd_pipeline.evaluation.protocol import Protocol
-from rd_pipeline.export.policy_spec import PolicySpec
 from rd_pipeline.motion.reference import ReferenceMotion
-from rd_pipeline.rl.backend import MujocoCpuBackend
+from rd_pipeline.policy_spec import PolicySpec
 from rd_pipeline.rl.env_config import Randomization
+from rd_pipeline.rl.physics import MujocoCpuBackend
 from rd_pipeline.rl.sim_model import randomized_copy
 from rd_pipeline.rl.terminations import bad_orientation, motion_far
 

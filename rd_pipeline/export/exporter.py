@@ -12,7 +12,7 @@ import torch
 from rsl_rl.models import MLPModel
 from tensordict import TensorDict
 
-from rd_pipeline.export.policy_spec import FORMAT_VERSION, PolicySpec
+from rd_pipeline.policy_spec import FORMAT_VERSION, PolicySpec
 from rd_pipeline.rl.actions import joint_semantics
 from rd_pipeline.rl.observations import ObservationsCfg, actor_terms, layout_json
 from rd_pipeline.robots import Robot

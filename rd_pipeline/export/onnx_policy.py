@@ -10,13 +10,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import torch
 
-from rd_pipeline.export.policy_spec import PolicySpec
+from rd_pipeline.policy_spec import ONNX_FILE, PolicySpec
 
-ONNX_FILE = "policy.onnx"
-"""File name of the ONNX policy inside an export artifact."""
+__all__ = ["ONNX_FILE", "export_onnx", "onnx_metadata"]
+
 OPSET = 18
 """ONNX opset the policy is written with."""
 
@@ -68,19 +67,3 @@ def export_onnx(module: torch.nn.Module, observation_size: int, spec: PolicySpec
         entry.value = value
     onnx.checker.check_model(model)
     onnx.save(model, str(path))
-
-
-class OnnxPolicy:
-    """`policy.onnx` on onnxruntime (one thread), called like the TorchScript policy on numpy arrays."""
-
-    def __init__(self, path: Path) -> None:
-        import onnxruntime
-
-        options = onnxruntime.SessionOptions()
-        options.intra_op_num_threads = 1
-        options.inter_op_num_threads = 1
-        self.session = onnxruntime.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-        self.metadata = self.session.get_modelmeta().custom_metadata_map
-
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        return self.session.run(None, {"obs": obs.astype(np.float32)})[0]

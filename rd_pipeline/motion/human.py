@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rd_pipeline.artifacts.files import open_npz
+from rd_pipeline.files import open_npz
 from rd_pipeline.motion.bvh import BvhClip, forward_kinematics
 from rd_pipeline.motion.lafan import LAFAN_CM_TO_M, LAFAN_TO_Z_UP  # noqa: F401 (re-exported)
 

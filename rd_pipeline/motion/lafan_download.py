@@ -11,8 +11,8 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import DownloadColumn, Progress, TransferSpeedColumn
 
-from rd_pipeline.artifacts.keys import file_sha256
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.files import file_sha256
 
 LAFAN_URL = (
     "https://media.githubusercontent.com/media/ubisoft/ubisoft-laforge-animation-dataset/master/lafan1/lafan1.zip"

@@ -9,8 +9,8 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from rd_pipeline.artifacts.files import open_npz
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.files import open_npz
 from rd_pipeline.robots import Robot
 
 REFERENCE_FILE = "reference.npz"

@@ -9,10 +9,10 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.evaluation.retarget_quality import FootMeshes, colliding_frames
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
 from rd_pipeline.retarget.ik import RetargetIk
+from rd_pipeline.retarget.quality import FootMeshes, colliding_frames
 from rd_pipeline.retarget.repair import repair_lag
 from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.retarget.smoothing import blend_configurations, smooth_cover

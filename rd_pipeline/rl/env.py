@@ -5,22 +5,25 @@ events are configured terms (`EnvConfig`), and `step` only wires them together. 
 terms are batched torch on the configured device; episode bookkeeping (lengths, start segments,
 pushes) stays on the host beside the random generator and the sampler, so a step reads only its done
 flags back from the device. MuJoCo is only reached through the backend seam
-(`rd_pipeline.rl.backend`). Observations come in rsl-rl groups (`policy`, `critic`); rewards come
+(`rd_pipeline.rl.physics`). Observations come in rsl-rl groups (`policy`, `critic`); rewards come
 per group, one column per critic value head.
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 from tensordict import TensorDict
 
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.rl import curricula, events
 from rd_pipeline.rl.actions import ResidualActions, joint_semantics
-from rd_pipeline.rl.backend import make_backend
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.observations import ActorInputs, actor_frame, actor_terms
+from rd_pipeline.rl.physics import make_backend
 from rd_pipeline.rl.quat import rotate_inverse
 from rd_pipeline.rl.reward_terms import TermContext, TrackingState
 from rd_pipeline.rl.rewards import AdaptiveSigma, RewardManager
@@ -54,6 +57,13 @@ class TrackingEnv:
         self.segment_lengths = torch.as_tensor(segment_lengths)
         self.max_episode_length = reference.n_frames
         self.step_dt = config.physics_dt * config.decimation
+        self.control_hz = 1.0 / self.step_dt
+        # One reference frame per control step: a reference at another rate would play too fast or slow.
+        if not math.isclose(self.control_hz, reference.fps, rel_tol=1e-6):
+            raise PipelineError(
+                f"train.env: the control rate 1 / (physics_dt * decimation) = {self.control_hz:g} Hz "
+                f"differs from the reference's {reference.fps:g} fps"
+            )
         rc = robot.config
 
         sensors = config.backend == "rollout"

@@ -40,7 +40,7 @@ def survival(
             obs, _, dones, extras = env.step(policy(obs))
             steps += alive.float()
             alive &= ~dones
-    return steps.cpu() / 50.0
+    return steps.cpu() / env.control_hz
 
 
 def zero_action(num_actions: int) -> Callable[[TensorDict], torch.Tensor]:
@@ -62,7 +62,7 @@ def checkpoint_scorer(env: TrackingEnv, policy: Callable[[TensorDict], torch.Ten
     fresh = env.state_dict()
     starts = scoring_starts(env.max_episode_length, env.num_envs)
     # The last frame ends an episode, so from frame f the most there is to survive is n - 1 - f steps.
-    left_s = (env.max_episode_length - 1 - starts) / 50.0
+    left_s = (env.max_episode_length - 1 - starts) / env.control_hz
 
     def score() -> dict[str, float]:
         env.load_state_dict(fresh)

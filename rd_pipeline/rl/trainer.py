@@ -14,32 +14,7 @@ import torch
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.ppo import MultiHeadPPO
 from rd_pipeline.rl.rewards import GROUPS
-
-CHECKPOINT_DIR = "checkpoints"
-LOG_FILE = "training_log.jsonl"
-
-
-def checkpoint_path(folder: Path, iteration: int) -> Path:
-    """Where a training folder keeps the checkpoint saved after `iteration` iterations."""
-    return folder / CHECKPOINT_DIR / f"model_{iteration}.pt"
-
-
-def checkpoints_by_iteration(folder: Path) -> dict[int, Path]:
-    """A training folder's checkpoints keyed by the iteration each was saved after, oldest first."""
-    found = {int(path.stem.removeprefix("model_")): path for path in (folder / CHECKPOINT_DIR).glob("model_*.pt")}
-    return dict(sorted(found.items()))
-
-
-def read_training_log(folder: Path) -> list[dict]:
-    """The rows of a training folder's log, one per iteration, oldest first."""
-    return [json.loads(line) for line in (folder / LOG_FILE).read_text().splitlines()]
-
-
-def best_scored(rows: list[dict]) -> dict | None:
-    """The log row of the best-scored checkpoint: the longest start-zero survival, then the highest
-    completion, then the latest; None when no row has a score."""
-    scored = [row for row in rows if "start_zero_s" in row]
-    return max(scored, key=lambda row: (row["start_zero_s"], row["completion"], row["iteration"]), default=None)
+from rd_pipeline.rl.training_log import LOG_FILE, best_scored, checkpoint_path
 
 
 def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, env: TrackingEnv) -> None:
@@ -119,7 +94,7 @@ def train(
             "iteration": iteration + 1,
             "seconds": round(seconds, 3),
             "samples_per_s": round(env.num_envs * ppo.storage.num_transitions_per_env / seconds, 1),
-            "episode_length_s": round(float(np.mean(lengths)) / 50.0, 4) if lengths else None,
+            "episode_length_s": round(float(np.mean(lengths)) / env.control_hz, 4) if lengths else None,
             "reward": round(float(per_group.sum()), 4),
             **{f"reward_{g}": round(float(v), 4) for g, v in zip(GROUPS, per_group)},
             **{f"loss_{k}": round(float(v), 4) for k, v in losses.items()},

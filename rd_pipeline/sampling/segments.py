@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rd_pipeline.artifacts.files import open_npz
+from rd_pipeline.files import open_npz
 
 SEGMENTS_FILE = "segments.npz"
 """File name of the segment statistics inside a `stats` artifact."""

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
-from rd_pipeline.artifacts.files import open_npz
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.evaluation.retarget_quality import QUALITY_SERIES_FILE
+from rd_pipeline.files import open_npz
 from rd_pipeline.motion.human import HUMAN_MOTION_FILE, HumanMotion
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+from rd_pipeline.retarget.quality import QUALITY_SERIES_FILE
 from rd_pipeline.retarget.targets import TARGETS_FILE
 from rd_pipeline.viz.rerun_view import log_human, log_points, log_robot_meshes, log_series, open_recording
 

@@ -17,6 +17,8 @@ from rd_pipeline.errors import PipelineError
 FORMAT_VERSION = 2
 POLICY_FILE = "policy.pt"
 SPEC_FILE = "policy.json"
+ONNX_FILE = "policy.onnx"
+"""File name of the ONNX policy inside an export artifact."""
 
 _NUMBER = (int, float)
 # Dotted field -> expected type; lists are checked element-wise and per-joint lists for their length.

@@ -1,17 +1,12 @@
-"""The `rd-pipeline` command line (tyro over frozen dataclasses, one per subcommand)."""
+"""The arguments of each `rd-pipeline` subcommand: one frozen dataclass each, read by tyro."""
 
 from __future__ import annotations
 
-import os
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
 import tyro
-from rich.console import Console
-
-from rd_pipeline.errors import PipelineError
 
 DEFAULT_ROBOT = "g1"
 DEFAULT_MOTION = "dance1_subject2"
@@ -51,6 +46,29 @@ class Run:
     """Parameter overrides, `stage.param=value`."""
     params_file: Path | None = None
     """A DVC-style params file (`params.yaml`) with a `stages:` table."""
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Show the DAG a run would execute: each stage's key, whether it is cached, its resolved params;
+    runs nothing."""
+
+    robot: str = DEFAULT_ROBOT
+    """Robot (`rd-pipeline robots`)."""
+    motion: str = DEFAULT_MOTION
+    """Motion (`rd-pipeline motions`)."""
+    profile: str | None = None
+    """Parameter profile: smoke, cpu or paper (default: the params file's, else smoke)."""
+    seed: int = 0
+    """Seed for stages that draw random numbers."""
+    source: str | None = None
+    """Force the motion source: `bvh` (parse + retarget) or `csv` (import)."""
+    set: tuple[str, ...] = ()
+    """Parameter overrides, `stage.param=value`."""
+    params_file: Path | None = None
+    """A DVC-style params file (`params.yaml`) with a `stages:` table."""
+    json: bool = False
+    """Print a JSON list of `{"stage", "key", "cached", "params"}` instead of a table."""
 
 
 @dataclass(frozen=True)
@@ -193,57 +211,3 @@ class Ablate(Sweep):
     arms: tuple[str, ...] = ()
     """Arms to run (default: all of the study's); residual: absolute, selective, hip_knee_ankle,
     all_legs, legs_torso, all, reference_locked; sampler: uniform, distribution, failure, combined."""
-
-
-def main(argv: list[str] | None = None) -> int:
-    command = tyro.extras.subcommand_cli_from_dict(
-        {
-            "run": Run,
-            "stage": StageCommand,
-            "status": Status,
-            "view": View,
-            "export-motion": ExportMotion,
-            "fetch-lafan": FetchLafan,
-            "robots": Robots,
-            "motions": Motions,
-            "sweep": Sweep,
-            "ablate": Ablate,
-        },
-        prog="rd-pipeline",
-        args=argv,
-        description="LAFAN1 mocap -> humanoid dance policies, one DAG per (robot, motion).",
-    )
-    console = Console(stderr=True, soft_wrap=True)
-    try:
-        return _dispatch(command, console)
-    except PipelineError as exc:
-        console.print(f"[red]error:[/] {exc}", highlight=False, soft_wrap=True)
-        return 2
-    except KeyboardInterrupt:
-        console.print("[red]interrupted[/]: no partial artifact was kept")
-        return 130
-    except BrokenPipeError:  # `rd-pipeline robots | head`: the reader left; say nothing more
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
-
-
-def _dispatch(command: object, console: Console) -> int:
-    from rd_pipeline import commands
-
-    handlers = {
-        Run: commands.run,
-        StageCommand: commands.stage,
-        Status: commands.status,
-        View: commands.view,
-        ExportMotion: commands.export_motion,
-        FetchLafan: commands.fetch_lafan,
-        Robots: commands.robots,
-        Motions: commands.motions,
-        Sweep: commands.sweep,
-        Ablate: commands.ablate,
-    }
-    return handlers[type(command)](command, console)
-
-
-def entry_point() -> None:
-    sys.exit(main())

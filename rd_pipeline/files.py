@@ -1,7 +1,8 @@
-"""Reading an artifact's array files with one clear error when a file is damaged."""
+"""File helpers below the store: content hashes, and array files read with one clear error when damaged."""
 
 from __future__ import annotations
 
+import hashlib
 import zipfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -22,3 +23,11 @@ def open_npz(path: Path) -> Iterator[np.lib.npyio.NpzFile]:
         raise PipelineError(
             f"{path}: cannot be read ({type(exc).__name__}: {exc}); `rd-pipeline run` recomputes a damaged artifact"
         ) from None
+
+
+def file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.rl.backend import PhysicsState, body_velocities_torch
+from rd_pipeline.rl.physics.state import PhysicsState, body_velocities_torch
 from rd_pipeline.rl.sim_model import RANDOMIZED_FIELDS
 
 

@@ -21,6 +21,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from rd_pipeline import paths
+from rd_pipeline.api import workspace
+from rd_pipeline.artifacts.keys import artifact_key
+from rd_pipeline.evaluation.validation import ValidationReport
 
 EXECUTORS = ("local", "ray")
 SHARED_UNTIL = "prior"
@@ -52,7 +55,7 @@ class TrialResult:
     error: str = ""
     """Last line of the trial's error output when it failed."""
     metrics: dict = field(default_factory=dict)
-    """The validate stage's manifest metrics."""
+    """The headline of the trial's validation report."""
     report: str = ""
     """Path of the trial's `report.json`."""
 
@@ -65,6 +68,39 @@ def make_trials(
         Trial(r, m, s, name, sets)
         for (name, sets), r, m, s in itertools.product(variants.items(), robots, motions, seeds)
     ]
+
+
+SWEEP_COLUMNS = (
+    "start_zero_survival_s",
+    "zero_action_start_zero_survival_s",
+    "mean_survival_s",
+    "completion_pct",
+    "E_g_mpbpe",
+    "E_mpjpe",
+)
+"""Summary-table columns, from each trial's validate manifest."""
+
+
+def trial_plan(trial: Trial, profile: str | None) -> workspace.Plan:
+    """The plan of a trial's `rd-pipeline run` (its params are checked here, before any work)."""
+    return workspace.plan(trial.robot, trial.motion, profile, overrides=trial.assignments, seed=trial.seed)
+
+
+def trial_artifact(trial: Trial, profile: str | None, stage: str) -> Path | None:
+    """The folder of the `stage` artifact a trial's run produced (found by its planned key), or None."""
+    return workspace.artifact(trial_plan(trial, profile), stage)
+
+
+def validation_report(trial: Trial, profile: str | None) -> Path | None:
+    """The `report.json` a trial's run produced, or None."""
+    folder = trial_artifact(trial, profile, "validate")
+    return folder / "report.json" if folder else None
+
+
+def sweep_folder(label: str, trials: list[Trial], profile: str | None) -> Path:
+    """Where a sweep writes its summary: the same trials and profile always land in the same folder."""
+    described = {"trials": [t.label for t in trials], "sets": [t.assignments for t in trials], "profile": profile}
+    return paths.artifacts_dir() / "sweeps" / f"{label}-{artifact_key('sweep', 1, described, {}, {})[:8]}"
 
 
 def _cli(args: list[str], env: dict[str, str]) -> subprocess.CompletedProcess:
@@ -130,7 +166,7 @@ def run_sweep(
             report = find_report(trial) if ok else None
             if report is not None:
                 result.report = str(report)
-                result.metrics = json.loads((report.parent / "manifest.json").read_text())["metrics"]
+                result.metrics = ValidationReport.load(report.parent).headline()
         on_result(result)
         results.append(result)
     return results

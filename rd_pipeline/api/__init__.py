@@ -1,0 +1,1 @@
+"""The Python API under the CLI: plan, run and read a (robot, motion) DAG; sweeps and ablations."""

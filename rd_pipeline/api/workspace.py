@@ -1,0 +1,204 @@
+"""Plan a (robot, motion) DAG, run any part of it, and read its artifacts.
+
+    from rd_pipeline.api import workspace
+
+    plan = workspace.plan("g1", "dance1_subject2", profile="cpu", overrides=("train.clip=0:10",))
+    workspace.run(plan, until="train")
+    log = workspace.training_log(workspace.artifact(plan, "train"))
+
+The CLI, the sweeps and the benchmarks all go through these functions, so a plan made here has the
+keys `rd-pipeline run` would compute for the same arguments.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+
+from rd_pipeline import paths
+from rd_pipeline.artifacts.runner import Pipeline, PlannedStage, StageOutcome, execute, resolve_source, stage_status
+from rd_pipeline.artifacts.stage import Stage, build_params
+from rd_pipeline.artifacts.store import MANIFEST, ArtifactStore
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.params import layered_params
+from rd_pipeline.rl.training_log import checkpoints_by_iteration, read_training_log
+from rd_pipeline.robots.config import load_robot_config
+from rd_pipeline.stages import REGISTRY
+
+
+@dataclass(frozen=True)
+class Plan:
+    """One (robot, motion) DAG with its params resolved, bound to an artifact store."""
+
+    pipeline: Pipeline
+    """The stages of this source and their layered param values."""
+    store: ArtifactStore
+    """Where its artifacts are read and written."""
+
+    @property
+    def robot(self) -> str | None:
+        return self.pipeline.robot
+
+    @property
+    def motion(self) -> str:
+        return self.pipeline.motion
+
+    def stages(self) -> list[PlannedStage]:
+        """Every stage of the chain with its typed params and key, in run order."""
+        return self.pipeline.plan(self.pipeline.chain())
+
+    def stage(self, name: str) -> PlannedStage:
+        """One planned stage by name."""
+        for entry in self.stages():
+            if entry.name == name:
+                return entry
+        names = ", ".join(entry.name for entry in self.stages())
+        raise PipelineError(f"stage '{name}' is not in the {self.pipeline.source} pipeline (stages: {names})")
+
+
+def plan(
+    robot: str | None,
+    motion: str,
+    profile: str | None = None,
+    params_file: Path | None = None,
+    overrides: tuple[str, ...] = (),
+    seed: int | None = None,
+    source: str | None = None,
+    store: Path | None = None,
+) -> Plan:
+    """Resolve the params of every stage (profile < params file < `stage.param=value` overrides) and
+    the motion's source; every value is checked now, also for stages that will not run."""
+    if robot is not None:
+        load_robot_config(robot)  # unknown robot: one clear line before anything else
+    names = [stage.name for stage in REGISTRY]
+    values = layered_params(profile, names, params_file, overrides)
+    for stage in REGISTRY:
+        build_params(stage, values.get(stage.name, {}))
+    if seed is not None:
+        for stage in REGISTRY:
+            if "seed" in {field.name for field in dataclasses.fields(stage.params)}:
+                values.setdefault(stage.name, {}).setdefault("seed", seed)
+    pipeline = Pipeline(REGISTRY, robot, motion, resolve_source(robot, motion, source), values)
+    _check_control_rate(pipeline)
+    return Plan(pipeline, ArtifactStore(store or paths.artifacts_dir()))
+
+
+def _check_control_rate(pipeline: Pipeline) -> None:
+    """The policy steps once per reference frame, so the training control rate must equal the
+    reference's fps; said before any stage runs."""
+    chain = {stage.provides: stage for stage in pipeline.chain()}
+    if "reference" not in chain or "policy" not in chain:
+        return
+    maker = chain["reference"]
+    fps = build_params(maker, pipeline.param_values.get(maker.name, {})).fps
+    trainer = chain["policy"]
+    env = build_params(trainer, pipeline.param_values.get(trainer.name, {})).env
+    control_hz = 1.0 / (env.physics_dt * env.decimation)
+    if not math.isclose(control_hz, fps, rel_tol=1e-6):
+        raise PipelineError(
+            f"{trainer.name}.env.physics_dt * {trainer.name}.env.decimation give a {control_hz:g} Hz control rate, "
+            f"but {maker.name}.fps is {fps:g}: the policy steps once per reference frame"
+        )
+
+
+def run(
+    plan: Plan,
+    start: str | None = None,
+    until: str | None = None,
+    only: str | None = None,
+    force: bool = False,
+    resume: bool = False,
+    console: Console | None = None,
+) -> list[StageOutcome]:
+    """Run the selected stages of `plan`; cached artifacts are reused without work."""
+    return execute(plan.pipeline, plan.store, start, until, only, force, console, resume)
+
+
+def providing(plan: Plan, role: str) -> str:
+    """The name of the stage of this plan's chain that provides `role` (`reference`: retarget or import)."""
+    return next(stage.name for stage in plan.pipeline.chain() if stage.provides == role)
+
+
+def artifact(plan: Plan, stage: str) -> Path | None:
+    """The folder of `stage`'s artifact for this plan's key, or None when it is not in the store."""
+    entry = plan.stage(stage)
+    robot = plan.robot if entry.stage.per_robot else None
+    found = plan.store.find(stage, robot, plan.motion, entry.key)
+    return found.path if found else None
+
+
+def status(plan: Plan, verify: bool = False) -> list[dict[str, Any]]:
+    """Per stage: key, path and state (cached / damaged / stale / missing). A plan without a robot
+    covers only the robot-independent stages."""
+    pipeline = plan.pipeline
+    if pipeline.robot is None:
+        pipeline = dataclasses.replace(pipeline, registry=tuple(s for s in pipeline.registry if not s.per_robot))
+    return stage_status(pipeline, plan.store, verify)
+
+
+def pairs_in_store(root: Path, robot: str | None, motion: str | None) -> list[tuple[str | None, str]]:
+    """(robot, motion) pairs with any artifact under `root`, filtered by `robot` and `motion`; robot
+    None for motions that have only robot-independent artifacts."""
+    found: set[tuple[str | None, str]] = set()
+    for stage in REGISTRY:
+        folder = root / stage.name
+        pattern = "*/*" if stage.per_robot else "*"
+        for path in folder.glob(pattern) if folder.is_dir() else []:
+            found.add((path.parent.name, path.name) if stage.per_robot else (None, path.name))
+    with_robot = {m for r, m in found if r is not None}
+    pairs = [(r, m) for r, m in found if r is not None or m not in with_robot]
+    pairs = [(r, m) for r, m in pairs if robot in (None, r) or r is None]
+    pairs = [(r, m) for r, m in pairs if motion is None or m == motion]
+    return sorted(pairs, key=lambda pair: (pair[1], pair[0] or ""))
+
+
+def registered_stage(name: str) -> Stage:
+    """A stage of the registry by name, or one line naming the stages that exist."""
+    by_name = {stage.name: stage for stage in REGISTRY}
+    if name not in by_name:
+        raise PipelineError(f"unknown stage '{name}' (stages: {', '.join(by_name)})")
+    return by_name[name]
+
+
+def metrics(folder: Path) -> dict[str, Any]:
+    """The metrics an artifact's manifest recorded."""
+    return json.loads((folder / MANIFEST).read_text()).get("metrics", {})
+
+
+def training_log(train: Path) -> list[dict]:
+    """A train artifact's log rows, one per iteration."""
+    return read_training_log(train)
+
+
+def training_checkpoints(train: Path) -> dict[int, Path]:
+    """A train artifact's checkpoints by iteration, oldest first."""
+    return checkpoints_by_iteration(train)
+
+
+def training_runs(train: Path) -> list[tuple[str, float]]:
+    """(key, seconds) of each run behind a train artifact, oldest first: a grown training continues
+    the shorter runs before it."""
+    manifest = json.loads((train / MANIFEST).read_text())
+    this_run = (manifest["key"], manifest["duration_s"])
+    earlier = manifest["metrics"].get("continued_from")
+    if not earlier:
+        return [this_run]
+    if not (train.parent / earlier / MANIFEST).is_file():
+        raise PipelineError(f"{train}: continues run {earlier}, which is no longer in the store; its time is unknown")
+    return [*training_runs(train.parent / earlier), this_run]
+
+
+def training_seconds(train: Path) -> float:
+    """A train artifact's seconds, with those of the shorter runs a grown training continued."""
+    return sum(seconds for _, seconds in training_runs(train))
+
+
+def available_motions() -> dict[str, list[str]]:
+    """Motion name -> the sources present for it (`bvh`, `csv:<robot>`)."""
+    return paths.available_motions()

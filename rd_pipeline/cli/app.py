@@ -1,0 +1,79 @@
+"""The `rd-pipeline` command line: tyro parses a subcommand's arguments, `commands` carries it out."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import tyro
+from rich.console import Console
+
+from rd_pipeline.cli import commands
+from rd_pipeline.cli.args import (
+    Ablate,
+    ExportMotion,
+    FetchLafan,
+    Motions,
+    Plan,
+    Robots,
+    Run,
+    StageCommand,
+    Status,
+    Sweep,
+    View,
+)
+from rd_pipeline.errors import PipelineError
+
+
+def main(argv: list[str] | None = None) -> int:
+    command = tyro.extras.subcommand_cli_from_dict(
+        {
+            "run": Run,
+            "plan": Plan,
+            "stage": StageCommand,
+            "status": Status,
+            "view": View,
+            "export-motion": ExportMotion,
+            "fetch-lafan": FetchLafan,
+            "robots": Robots,
+            "motions": Motions,
+            "sweep": Sweep,
+            "ablate": Ablate,
+        },
+        prog="rd-pipeline",
+        args=argv,
+        description="LAFAN1 mocap -> humanoid dance policies, one DAG per (robot, motion).",
+    )
+    console = Console(stderr=True, soft_wrap=True)
+    try:
+        return _dispatch(command, console)
+    except PipelineError as exc:
+        console.print(f"[red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        return 2
+    except KeyboardInterrupt:
+        console.print("[red]interrupted[/]: no partial artifact was kept")
+        return 130
+    except BrokenPipeError:  # `rd-pipeline robots | head`: the reader left; say nothing more
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+
+
+def _dispatch(command: object, console: Console) -> int:
+    handlers = {
+        Run: commands.run,
+        Plan: commands.plan,
+        StageCommand: commands.stage,
+        Status: commands.status,
+        View: commands.view,
+        ExportMotion: commands.export_motion,
+        FetchLafan: commands.fetch_lafan,
+        Robots: commands.robots,
+        Motions: commands.motions,
+        Sweep: commands.sweep,
+        Ablate: commands.ablate,
+    }
+    return handlers[type(command)](command, console)
+
+
+def entry_point() -> None:
+    sys.exit(main())

@@ -1,0 +1,301 @@
+"""What each `rd-pipeline` subcommand does: read its arguments, call the API, print the result."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+from rd_pipeline import paths
+from rd_pipeline.api import sweeps, workspace
+from rd_pipeline.api.ablation import STUDIES, ablation_table, write_ablation
+from rd_pipeline.artifacts.runner import StageOutcome
+from rd_pipeline.cli.args import (
+    Ablate,
+    ExportMotion,
+    FetchLafan,
+    Motions,
+    Plan,
+    Robots,
+    Run,
+    StageCommand,
+    Status,
+    Sweep,
+    View,
+)
+from rd_pipeline.errors import PipelineError
+
+
+def run(cmd: Run, console: Console) -> int:
+    assignments = (
+        cmd.set
+        + ((f"train.clip={cmd.clip}",) if cmd.clip else ())
+        + ((f"train.env.backend={cmd.backend}",) if cmd.backend else ())
+    )
+    plan = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
+    source = plan.pipeline.source
+    console.print(f"rd-pipeline: {cmd.robot}/{cmd.motion} from {source}, artifacts in {plan.store.root}")
+    outcomes = workspace.run(
+        plan,
+        start=cmd.from_,
+        until=cmd.until,
+        only=cmd.only,
+        force=cmd.force,
+        console=console,
+        resume=cmd.resume,
+    )
+    print_summary(plan, outcomes, console)
+    return 0
+
+
+def plan(cmd: Plan, console: Console) -> int:
+    planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, cmd.set, cmd.seed, cmd.source)
+    rows = [
+        {
+            "stage": entry.name,
+            "key": entry.key,
+            "cached": workspace.artifact(planned, entry.name) is not None,
+            "params": dataclasses.asdict(entry.params),
+        }
+        for entry in planned.stages()
+    ]
+    if cmd.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    source = planned.pipeline.source
+    print(f"{cmd.robot}/{cmd.motion} from {source}, artifacts in {planned.store.root}")
+    for row in rows:
+        state = "cached" if row["cached"] else "to run"
+        print(f"{row['stage']:<9} {row['key']}  {state}")
+        for name, value in _flat(row["params"]).items():
+            print(f"    {name} = {value}")
+    return 0
+
+
+def _flat(values: dict, prefix: str = "") -> dict[str, object]:
+    """Nested params as dotted names, the way `--set` spells them."""
+    flat: dict[str, object] = {}
+    for name, value in values.items():
+        if isinstance(value, dict):
+            flat.update(_flat(value, f"{prefix}{name}."))
+        else:
+            flat[f"{prefix}{name}"] = value
+    return flat
+
+
+def print_summary(plan: workspace.Plan, outcomes: list[StageOutcome], console: Console) -> None:
+    """Per stage: cached or ran, time, headline metrics; then the report to read."""
+    stages = {s.name: s for s in plan.pipeline.registry}
+    console.print(f"summary {plan.robot}/{plan.motion}:", highlight=False)
+    report = None
+    for outcome in outcomes:
+        stage = stages[outcome.name]
+        metrics = workspace.metrics(outcome.path)
+        shown = "  ".join(f"{name}={_short(metrics[name])}" for name in stage.headline if name in metrics)
+        state = "cached" if outcome.cached else "ran"
+        console.print(f"  {outcome.name:<9} {state:<6} {outcome.seconds:7.1f} s  {shown}", highlight=False)
+        if stage.report:
+            report = outcome.path / stage.report
+    if report is not None:
+        console.print(f"report: {report}", highlight=False)
+
+
+def _short(value: object) -> str:
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
+def stage(cmd: StageCommand, console: Console) -> int:
+    chosen = workspace.registered_stage(cmd.name)
+    planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, cmd.set, cmd.seed, chosen.source)
+    workspace.run(
+        planned,
+        only=cmd.name,
+        force=cmd.force,
+        console=console,
+        resume=cmd.resume,
+    )
+    return 0
+
+
+def status(cmd: Status, console: Console) -> int:
+    root = paths.artifacts_dir()
+    if cmd.robot and cmd.motion:
+        pairs: list[tuple[str | None, str]] = [(cmd.robot, cmd.motion)]
+    else:
+        pairs = workspace.pairs_in_store(root, cmd.robot, cmd.motion)
+    reports = []
+    for robot, motion in pairs:
+        planned = workspace.plan(robot, motion, cmd.profile, cmd.params_file, cmd.set, source=cmd.source)
+        reports.append(
+            {
+                "robot": robot,
+                "motion": motion,
+                "source": planned.pipeline.source,
+                "stages": workspace.status(planned, cmd.verify),
+            }
+        )
+    if cmd.json:
+        print(json.dumps({"artifacts": str(root), "pipelines": reports}, indent=2))
+        return 0
+    if not reports:
+        console.print(f"no artifacts in {escape(str(root))}")
+    for report in reports:
+        _print_status_table(report)
+    return 0
+
+
+def _print_status_table(report: dict) -> None:
+    colors = {"cached": "green", "damaged": "red", "stale": "yellow", "missing": "red"}
+    table = Table(title=escape(f"{report['robot'] or '(any robot)'}/{report['motion']} ({report['source']})"))
+    for column in ("stage", "state", "key", "path"):
+        table.add_column(column)
+    for row in report["stages"]:
+        state = f"[{colors[row['state']]}]{row['state']}[/]"
+        where = row["path"] or ""
+        reason = row.get("reason")
+        shown = f"{where} ({reason})" if where and reason else reason or where
+        table.add_row(row["stage"], state, row["key"] or "-", escape(shown))
+    out = Console()
+    if not out.is_terminal:  # piped or logged: whole paths, not a table folded at 80 columns
+        out.width = 1000
+    out.print(table)
+
+
+def view(cmd: View, console: Console) -> int:
+    from rd_pipeline.viz.recording import TRACKED_FILE, record_motion
+    from rd_pipeline.viz.rerun_view import display_available
+
+    planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, source=cmd.source)
+    # Only the stages that make motion are needed; they are computed or taken from the cache.
+    until = workspace.providing(planned, "reference")
+    outcomes = workspace.run(planned, until=until, console=console)
+    artifacts = {o.name: o.path for o in outcomes}
+    # The tracked robot is shown when this configuration has been validated; view never trains.
+    validated = workspace.artifact(planned, "validate")
+    tracked = validated / TRACKED_FILE if validated else None
+    out = cmd.out
+    if out is None and not display_available():
+        out = planned.store.root / "views" / f"{cmd.robot}_{cmd.motion}.rrd"
+        console.print("no display here (DISPLAY and WAYLAND_DISPLAY are unset): writing the recording instead")
+    path = record_motion(cmd.robot, cmd.motion, artifacts, out, tracked)
+    if path is not None:
+        console.print(f"wrote {path}; open it with `rerun {path}` (pip package rerun-sdk) on a machine with a display")
+        if cmd.spawn:
+            subprocess.Popen([sys.executable, "-m", "rerun", str(path)])
+    return 0
+
+
+def export_motion(cmd: ExportMotion, console: Console) -> int:
+    from rd_pipeline.export.motion_csv import write_dataset_csv
+    from rd_pipeline.export.motion_mjlab import write_mjlab_npz
+    from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+    from rd_pipeline.robots import load_robot
+
+    if cmd.fps is not None and not cmd.fps > 0:
+        raise PipelineError(f"--fps must be positive, got {cmd.fps:g}")
+    planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, source=cmd.source)
+    made_by = workspace.providing(planned, "reference")
+    outcomes = workspace.run(planned, until=made_by, console=console)
+    folder = next(o.path for o in outcomes if o.name == made_by)
+    reference = ReferenceMotion.load(folder / REFERENCE_FILE)
+    robot = load_robot(cmd.robot)
+    missing: list[str] = []
+    if cmd.format == "csv":
+        fps = cmd.fps or 30.0
+        frames = write_dataset_csv(reference, robot.config, cmd.out, fps)
+    else:
+        fps = cmd.fps or reference.fps
+        frames, missing = write_mjlab_npz(reference, robot, cmd.out, fps)
+    console.print(f"wrote {cmd.out}: {frames} frames at {fps:g} fps from {made_by} {folder.name}", highlight=False)
+    if missing:
+        console.print(f"mjlab's {cmd.robot} model has joints this one lacks, written as 0: {', '.join(missing)}")
+    return 0
+
+
+def fetch_lafan(cmd: FetchLafan, console: Console) -> int:
+    from rd_pipeline.motion.lafan_download import install_lafan
+
+    installed = install_lafan(cmd.zip, paths.lafan_dir(), console)
+    console.print(f"installed {len(installed)} BVH files into {paths.lafan_dir()}")
+    return 0
+
+
+def robots(cmd: Robots, console: Console) -> int:
+    from rd_pipeline.robots.config import available_robots, load_robot_config
+
+    for name in available_robots():
+        config = load_robot_config(name)
+        print(
+            f"{name:<6} {len(config.joint_names):>2} joints, {len(config.policy_joints):>2} policy  {config.description}"
+        )
+    return 0
+
+
+def motions(cmd: Motions, console: Console) -> int:
+    found = paths.available_motions()
+    if not found:
+        raise PipelineError(f"no motions: {paths.lafan_dir()} has no BVH and RD_RETARGETED_DIR is not set or empty")
+    for name, sources in found.items():
+        print(f"{name:<18} {' '.join(sources)}")
+    return 0
+
+
+def _run_trials(cmd: Sweep, trials: list[sweeps.Trial], label: str, console: Console):
+    if cmd.executor not in sweeps.EXECUTORS:
+        raise PipelineError(f"executor must be local or ray, got '{cmd.executor}'")
+    for trial in trials:  # bad parameters fail here, before any work, with one line
+        sweeps.trial_plan(trial, cmd.profile)
+    out = sweeps.sweep_folder(label, trials, cmd.profile)
+    console.print(f"{label}: {len(trials)} trials ({cmd.executor}), results in {escape(str(out))}")
+
+    def on_result(result: sweeps.TrialResult) -> None:
+        status = "[green]ok[/]" if result.ok else f"[red]failed[/] {escape(result.error)}"
+        console.print(f"trial {escape(result.trial.label)}: {status} ({result.seconds:.0f} s)")
+
+    results = sweeps.run_sweep(
+        trials,
+        cmd.profile,
+        cmd.executor,
+        cmd.workers,
+        cmd.ray_address,
+        lambda trial: sweeps.validation_report(trial, cmd.profile),
+        on_result,
+        resume=cmd.resume,
+    )
+    summary = sweeps.write_summary(results, out, sweeps.SWEEP_COLUMNS)
+    table = Table("trial", "status", *sweeps.SWEEP_COLUMNS, title=f"{label} summary")
+    for r in results:
+        table.add_row(
+            escape(r.trial.label),
+            "ok" if r.ok else "failed",
+            *("–" if r.metrics.get(c) is None else f"{r.metrics[c]:.2f}" for c in sweeps.SWEEP_COLUMNS),
+        )
+    console.print(table)
+    console.print(f"wrote {escape(str(summary))}")
+    return results, out
+
+
+def sweep(cmd: Sweep, console: Console) -> int:
+    trials = sweeps.make_trials(list(cmd.robots), list(cmd.motions), list(cmd.seeds), {"default": cmd.set})
+    results, _ = _run_trials(cmd, trials, "sweep", console)
+    return 0 if all(r.ok for r in results) else 1
+
+
+def ablate(cmd: Ablate, console: Console) -> int:
+    arms = STUDIES[cmd.study]
+    unknown = [arm for arm in cmd.arms if arm not in arms]
+    if unknown:
+        raise PipelineError(f"--arms {unknown[0]}: not an arm of the {cmd.study} study (arms: {', '.join(arms)})")
+    chosen = cmd.arms or tuple(arms)
+    variants = {arm: cmd.set + arms[arm] for arm in chosen}
+    trials = sweeps.make_trials(list(cmd.robots), list(cmd.motions), list(cmd.seeds), variants)
+    results, out = _run_trials(cmd, trials, f"ablate-{cmd.study}", console)
+    path = write_ablation(cmd.study, ablation_table(cmd.study, chosen, results), results, out)
+    console.print(path.read_text(), highlight=False)
+    console.print(f"wrote {path}")
+    return 0 if all(r.ok for r in results) else 1

@@ -1,0 +1,37 @@
+"""Physics backends behind one seam: the environment logic (torch) never touches MuJoCo directly.
+
+Backends take and return torch tensors on their device: `rollout` (C MuJoCo batched by
+`mujoco.rollout`), `cpu` (C MuJoCo stepped from worker threads) and `warp` (MuJoCo Warp, the
+`gpu` extra) implement `PhysicsBackend` (`state.py`).
+"""
+
+from __future__ import annotations
+
+import mujoco
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.rl.physics.cpu import MujocoCpuBackend
+from rd_pipeline.rl.physics.rollout import MujocoRolloutBackend
+from rd_pipeline.rl.physics.state import PhysicsBackend, PhysicsState
+
+__all__ = ["BACKENDS", "MujocoCpuBackend", "MujocoRolloutBackend", "PhysicsBackend", "PhysicsState", "make_backend"]
+
+BACKENDS = ("rollout", "cpu", "warp")
+
+
+def make_backend(name: str, models: list[mujoco.MjModel], threads: int, device: str) -> PhysicsBackend:
+    """`rollout`: C MuJoCo batched by `mujoco.rollout` on `threads` threads, GIL released (models
+    need `body_sensors`); `cpu`: one C MuJoCo step call per environment from `threads` Python
+    threads; `warp`: MuJoCo Warp on `device` (`cuda`, `cuda:N`, or `cpu` for Warp's CPU device)."""
+    if name in ("rollout", "cpu") and device != "cpu":
+        raise PipelineError(f"train.env.device '{device}' needs the warp backend (train.env.backend=warp)")
+    if name == "rollout":
+        return MujocoRolloutBackend(models, threads)
+    if name == "cpu":
+        return MujocoCpuBackend(models, threads)
+    if name == "warp":
+        # mujoco-warp is an optional extra: imported only when asked for.
+        from rd_pipeline.rl.physics.warp import MujocoWarpBackend
+
+        return MujocoWarpBackend(models, device)
+    raise PipelineError(f"train.env.backend must be one of {', '.join(BACKENDS)}, got '{name}'")

@@ -1,0 +1,64 @@
+"""What a training run is configured by: its budget, the clip, and the environment, PPO and
+sampler settings (profiles set these; they are the `train` stage's params)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion import MIN_MOTION_S
+from rd_pipeline.params import require_positive
+from rd_pipeline.rl.env_config import EnvConfig
+from rd_pipeline.rl.ppo_config import PpoConfig
+from rd_pipeline.sampling.sampler import SamplerConfig
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Training budget and the environment, PPO and sampler settings (profiles set these)."""
+
+    iterations: int = 20_000
+    """PPO iterations (paper: 20K for final policies)."""
+    checkpoint_every: int = 500
+    """Iterations between checkpoints."""
+    seed: int = 0
+    """Seeds torch, the environment and the sampler."""
+    clip: str = ""
+    """Train on part of the motion, `START:END` in seconds (empty: all of it)."""
+    scoring_starts: int = 8
+    """Start frames, evenly spaced over the clip from frame 0, from which each checkpoint is rolled out
+    with its mean action on nominal physics; `export` takes the best-scored checkpoint (late PPO
+    updates can knock back a policy that had learned the clip)."""
+    env: EnvConfig = EnvConfig()
+    """Environment."""
+    ppo: PpoConfig = PpoConfig()
+    """PPO."""
+    sampler: SamplerConfig = SamplerConfig()
+    """Segment sampler."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "iterations", "checkpoint_every", "scoring_starts")
+
+
+def clip_frames(clip: str, fps: float, n_frames: int, warn: Callable[[str], None] = print) -> tuple[int, int]:
+    """`START:END` seconds -> [start, end) frames of the reference; an END past the motion's end is
+    clamped to it, and `warn` says so."""
+    if not clip:
+        return 0, n_frames
+    try:
+        start_s, end_s = (float(x) if x else None for x in clip.split(":"))
+    except ValueError:
+        raise PipelineError(f"train.clip must be START:END in seconds, got '{clip}'") from None
+    start = round((start_s or 0.0) * fps)
+    end = n_frames if end_s is None else round(end_s * fps)
+    if end > n_frames:
+        warn(
+            f"train.clip '{clip}' ends after the {n_frames / fps:.2f} s motion: training on {start / fps:g}:{n_frames / fps:.2f}"
+        )
+        end = n_frames
+    if not 0 <= start < end - fps * MIN_MOTION_S:
+        raise PipelineError(
+            f"train.clip '{clip}' leaves less than {MIN_MOTION_S:g} s of the {n_frames / fps:.2f} s motion"
+        )
+    return start, end

@@ -1,0 +1,33 @@
+"""The layout of a training folder (checkpoints and the per-iteration log) and reading it back;
+no torch, so reading results stays light."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+CHECKPOINT_DIR = "checkpoints"
+LOG_FILE = "training_log.jsonl"
+
+
+def checkpoint_path(folder: Path, iteration: int) -> Path:
+    """Where a training folder keeps the checkpoint saved after `iteration` iterations."""
+    return folder / CHECKPOINT_DIR / f"model_{iteration}.pt"
+
+
+def checkpoints_by_iteration(folder: Path) -> dict[int, Path]:
+    """A training folder's checkpoints keyed by the iteration each was saved after, oldest first."""
+    found = {int(path.stem.removeprefix("model_")): path for path in (folder / CHECKPOINT_DIR).glob("model_*.pt")}
+    return dict(sorted(found.items()))
+
+
+def read_training_log(folder: Path) -> list[dict]:
+    """The rows of a training folder's log, one per iteration, oldest first."""
+    return [json.loads(line) for line in (folder / LOG_FILE).read_text().splitlines()]
+
+
+def best_scored(rows: list[dict]) -> dict | None:
+    """The log row of the best-scored checkpoint: the longest start-zero survival, then the highest
+    completion, then the latest; None when no row has a score."""
+    scored = [row for row in rows if "start_zero_s" in row]
+    return max(scored, key=lambda row: (row["start_zero_s"], row["completion"], row["iteration"]), default=None)
