@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import zipfile
 from pathlib import Path
 
@@ -39,7 +40,7 @@ def test_motions_lists_sources() -> None:
 
 
 @pytest.mark.offline
-@pytest.mark.parametrize("command", ["run", "stage", "status", "view", "fetch-lafan", "robots", "motions"])
+@pytest.mark.parametrize("command", ["run", "plan", "stage", "status", "view", "fetch-lafan", "robots", "motions"])
 def test_every_subcommand_has_help(command: str) -> None:
     result = cli(command, "--help")
     assert result.returncode == 0 and "usage:" in result.stdout.lower()
@@ -116,3 +117,41 @@ def test_run_help_names_every_stage_and_profile() -> None:
     text = " ".join(cli("run", "--help").stdout.split())
     for name in [stage.name for stage in REGISTRY] + list(PROFILES):
         assert name in text, name
+
+
+def test_plan_shows_each_stage_with_the_params_file_merged_into_the_profile(tmp_path: Path, artifacts: Path) -> None:
+    params = tmp_path / "params.yaml"
+    params.write_text("stages:\n  train:\n    env:\n      num_envs: 64\n")
+    assert cli("run", "--until", "parse").returncode == 0
+    result = cli("plan", "--profile", "paper", "--params-file", str(params), "--json")
+    assert result.returncode == 0, result.stderr
+    rows = json.loads(result.stdout)
+    assert [row["stage"] for row in rows] == ["parse", "retarget", "stats", "prior", "train", "export", "validate"]
+    assert [row["cached"] for row in rows] == [True] + [False] * 6
+    train = rows[4]["params"]
+    # The file names only num_envs; the profile's other train.env fields stay.
+    assert (train["env"]["num_envs"], train["env"]["backend"], train["env"]["device"]) == (64, "warp", "cuda")
+    assert train["iterations"] == 20000
+    assert sorted(path.name for path in artifacts.iterdir()) == ["parse"]  # plan ran nothing
+
+
+def test_a_params_file_and_set_give_the_same_keys(tmp_path: Path) -> None:
+    params = tmp_path / "params.yaml"
+    params.write_text("stages:\n  train:\n    env:\n      num_envs: 64\n")
+    from_file = json.loads(cli("plan", "--profile", "paper", "--params-file", str(params), "--json").stdout)
+    from_set = json.loads(cli("plan", "--profile", "paper", "--set", "train.env.num_envs=64", "--json").stdout)
+    assert [row["key"] for row in from_file] == [row["key"] for row in from_set]
+    default = json.loads(cli("plan", "--profile", "paper", "--json").stdout)
+    assert default[4]["key"] != from_set[4]["key"]  # the value reached the key
+
+
+def test_a_control_rate_off_the_reference_fps_is_refused_before_any_stage(artifacts: Path) -> None:
+    result = cli("run", "--set", "train.env.decimation=4")
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines()[-1] == (
+        "error: train.env.physics_dt * train.env.decimation give a 125 Hz control rate, but retarget.fps is 50: "
+        "the policy steps once per reference frame"
+    )
+    assert not artifacts.exists()
+    agreeing = cli("plan", "--set", "train.env.decimation=4", "retarget.fps=125")
+    assert agreeing.returncode == 0, agreeing.stderr

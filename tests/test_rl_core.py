@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import mujoco
@@ -9,12 +10,14 @@ import numpy as np
 import pytest
 import torch
 
+from rd_pipeline.rl import reward_terms, terminations
 from rd_pipeline.rl.actions import RESIDUAL_PRESETS, ActionConfig, ResidualActions, joint_semantics
 from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
 from rd_pipeline.rl.physics import MujocoCpuBackend
-from rd_pipeline.rl.reward_terms import TermContext, TrackingState
+from rd_pipeline.rl.reward_terms import PenaltyTerm, TermContext, TrackingState
 from rd_pipeline.rl.rewards import GROUPS, AdaptiveSigma, RewardManager, RewardsCfg
 from rd_pipeline.rl.sim_model import simulation_model
+from rd_pipeline.rl.terminations import TerminationContext, TerminationsCfg
 from rd_pipeline.robots import load_robot
 
 N, B, P = 3, 5, 4
@@ -291,3 +294,48 @@ def test_the_copied_rsl_rl_methods_match_the_installed_library() -> None:
         assert hashlib.sha256(source.encode()).hexdigest() == digest, (
             f"rsl-rl-lib's {name} changed: compare it with rd_pipeline/rl/ppo.py, then update UPSTREAM_SOURCES"
         )
+
+
+def test_a_new_reward_term_is_one_registered_function_plus_its_field(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Registered for this test only: monkeypatch removes the entry afterwards.
+    monkeypatch.setitem(reward_terms.REWARD_TERMS, "joint_pos_abs", reward_terms.REWARD_TERMS["joint_pos"])
+
+    @reward_terms.reward_term("joint")
+    def joint_pos_abs(s: TrackingState, c: TermContext, cfg: PenaltyTerm) -> torch.Tensor:
+        return (s.joint_pos - s.ref_joint_pos).abs().sum(-1)
+
+    extended = dataclasses.make_dataclass(
+        "Extended", [("joint_pos_abs", PenaltyTerm, PenaltyTerm(-1.0))], bases=(RewardsCfg,), frozen=True
+    )
+    joints = _state().joint_pos.clone()
+    joints[:, 0] += 0.2
+    groups, terms, _ = RewardManager(extended(), CONTEXT).compute(_state(joint_pos=joints), penalty_scale=0.8)
+    assert terms["joint_pos_abs"].tolist() == pytest.approx([-0.2] * N)  # not a regularization term: unscaled
+    plain, _, _ = MANAGER.compute(_state(joint_pos=joints), penalty_scale=0.8)
+    joint = GROUPS.index("joint")
+    assert torch.allclose(groups[:, joint] - plain[:, joint], torch.full((N,), -0.2, dtype=torch.float64))
+    unregistered = dataclasses.make_dataclass(
+        "Unregistered", [("joint_pos_sq", PenaltyTerm, PenaltyTerm(-1.0))], bases=(RewardsCfg,), frozen=True
+    )
+    with pytest.raises(KeyError, match="reward terms without a registered function: joint_pos_sq"):
+        RewardManager(unregistered(), CONTEXT)
+
+
+def test_an_episode_fails_when_any_termination_term_fires(monkeypatch: pytest.MonkeyPatch) -> None:
+    config = TerminationsCfg()
+    context = TerminationContext(config, root=0, bodies=torch.tensor([1, 2]), motion_far_m=0.5)
+    on_reference = _state()
+    assert terminations.failed(on_reference, context).tolist() == [False] * N
+    far = on_reference.body_pos.clone()
+    far[1, 2, 2] += 0.6  # env 1: a termination body 0.6 m above its reference
+    assert terminations.failed(_state(body_pos=far), context).tolist() == [False, True, False]
+    assert not terminations.failed(_state(body_pos=far), dataclasses.replace(context, motion_far_m=0.7)).any()
+    monkeypatch.setattr(terminations, "TERMINATION_TERMS", dict(terminations.TERMINATION_TERMS))
+
+    @terminations.termination_term
+    def joint_off(s: TrackingState, c: TerminationContext) -> torch.Tensor:
+        return (s.joint_pos - s.ref_joint_pos).abs().amax(-1) > 0.1
+
+    joints = on_reference.joint_pos.clone()
+    joints[2, 0] += 0.2
+    assert terminations.failed(_state(body_pos=far, joint_pos=joints), context).tolist() == [False, True, True]

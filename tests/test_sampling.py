@@ -115,13 +115,13 @@ def test_visited_credit_in_the_environment_follows_where_episodes_end() -> None:
     against the last."""
     credit = SamplerConfig(failure_credit="visited", update_interval=10**9)
     env = h1_2_dance_env(EnvConfig(num_envs=16), sampler_config=credit)
-    segment_of = lambda frames: torch.searchsorted(env.segment_starts, frames, right=True) - 1
+    segment_of = lambda frames: torch.searchsorted(env.command.segment_starts, frames, right=True) - 1
     visits = torch.zeros(env.sampler.n_segments, dtype=torch.float64)
     failures = torch.zeros(env.sampler.n_segments, dtype=torch.float64)
     spans = []
     for _ in range(120):
-        first = segment_of(env.start_frame.clone())
-        last = segment_of((env.frame + 1).clamp(max=env.max_episode_length - 1))
+        first = segment_of(env.command.start_frame.clone())
+        last = segment_of(env.command.next_frame())
         _, _, dones, extras = env.step(torch.zeros(env.num_envs, env.num_actions))
         for i in torch.nonzero(dones).flatten().tolist():
             visits[first[i] : last[i] + 1] += 1

@@ -13,9 +13,11 @@ from collections.abc import Callable
 
 import mujoco
 import numpy as np
+import torch
 
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.policy_spec import PolicySpec
+from rd_pipeline.rl.actions import ActionTargets
 
 Policy = Callable[[np.ndarray], np.ndarray]
 """(R, observation_size) float32 -> (R, num_actions)."""
@@ -65,9 +67,17 @@ class DeployController:
         self.default_actuated = default
         self.policy_in_actuated = np.array([actuated.index(j) for j in policy])
         self.default_policy = default[self.policy_in_actuated]
-        self.lower, self.upper = np.asarray(joints["policy_lower"]), np.asarray(joints["policy_upper"])
         self.outputs = np.array([policy.index(j) for j in spec.get("action.outputs")])
-        self.on_reference = np.array([kind != "absolute" for kind in spec.get("action.semantics")])
+        action = spec.get("action")
+        self.action_targets = ActionTargets(
+            on_reference=torch.tensor([kind != "absolute" for kind in action["semantics"]]),
+            outputs=torch.from_numpy(self.outputs),
+            default_pos=torch.from_numpy(self.default_policy),
+            lower=torch.tensor(joints["policy_lower"], dtype=torch.float64),
+            upper=torch.tensor(joints["policy_upper"], dtype=torch.float64),
+            scale=action["scale"],
+            clip=action["clip"],
+        )
         self.reference_joints = reference.joint_pos[:, [reference.joint_names.index(j) for j in policy]]
         self.terms = spec.get("observation.terms")
         self.history = spec.get("observation.history")
@@ -106,10 +116,9 @@ class DeployController:
 
     def targets(self, action: np.ndarray) -> np.ndarray:
         """(R, actuated) PD targets for this control step, per `policy.json`'s action block; advances the frame."""
-        a = self.spec.get("action")
-        policy_targets = np.where(self.on_reference, self.reference_joints[self._next_frame()], self.default_policy)
-        policy_targets[:, self.outputs] += a["scale"] * np.clip(action, -a["clip"], a["clip"])
-        policy_targets = np.clip(policy_targets, self.lower, self.upper)
+        reference_next = torch.from_numpy(self.reference_joints[self._next_frame()])
+        actions = torch.from_numpy(np.asarray(action, dtype=np.float64))
+        policy_targets = self.action_targets(actions, reference_next).numpy()
         ctrl = np.tile(self.default_actuated, (self.rollouts, 1))
         ctrl[:, self.policy_in_actuated] = policy_targets
         self.last_action = np.asarray(action, dtype=np.float64).copy()

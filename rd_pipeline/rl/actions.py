@@ -79,6 +79,39 @@ def joint_semantics(config: RobotConfig, preset: str) -> tuple[str, ...]:
     return tuple("residual" if m else other for m in mask)
 
 
+class ActionTargets:
+    """The one formula from policy outputs to joint targets, used by training and by the deploy loop
+    (`policy.json`'s `action.formula` says it in words): the base is the reference at the next
+    control step on residual and reference joints and the default pose on absolute ones; the outputs
+    add `scale * clip(action, -clip, clip)`; the targets stay inside the joint ranges."""
+
+    def __init__(
+        self,
+        on_reference: torch.Tensor,
+        outputs: torch.Tensor,
+        default_pos: torch.Tensor,
+        lower: torch.Tensor,
+        upper: torch.Tensor,
+        scale: float,
+        clip: float,
+    ) -> None:
+        self.on_reference = on_reference
+        self.outputs = outputs
+        self.default_pos = default_pos
+        self.lower = lower
+        self.upper = upper
+        self.scale = scale
+        self.clip = clip
+
+    def __call__(self, actions: torch.Tensor, reference_next: torch.Tensor) -> torch.Tensor:
+        """(N, A) outputs and (N, P) reference joints of the next step -> (N, P) targets."""
+        scaled = self.scale * actions.clamp(-self.clip, self.clip)
+        default = self.default_pos.expand_as(reference_next)
+        target = torch.where(self.on_reference, reference_next, default)
+        target[:, self.outputs] += scaled.to(target.dtype)
+        return torch.maximum(torch.minimum(target, self.upper), self.lower)
+
+
 class ResidualActions:
     """Turns policy outputs (N, A) into joint position targets for the P policy joints."""
 
@@ -93,22 +126,10 @@ class ResidualActions:
         self.config = config
         self.semantics = semantics
         self.outputs = torch.tensor([i for i, s in enumerate(semantics) if s != "reference"], dtype=torch.long)
-        on_reference = torch.tensor([s != "absolute" for s in semantics])
-        self.on_reference = on_reference.to(default_pos.device)
-        self.default_pos = default_pos
-        self.lower = lower
-        self.upper = upper
+        on_reference = torch.tensor([s != "absolute" for s in semantics]).to(default_pos.device)
+        self.targets = ActionTargets(on_reference, self.outputs, default_pos, lower, upper, config.scale, config.clip)
 
     @property
     def size(self) -> int:
         """A, the policy's action dimension."""
         return len(self.outputs)
-
-    def targets(self, actions: torch.Tensor, reference_next: torch.Tensor) -> torch.Tensor:
-        """(N, P) joint targets inside [lower, upper]."""
-        clip = self.config.clip
-        scaled = self.config.scale * actions.clamp(-clip, clip)
-        default = self.default_pos.expand_as(reference_next)
-        target = torch.where(self.on_reference, reference_next, default)
-        target[:, self.outputs] += scaled.to(target.dtype)
-        return torch.maximum(torch.minimum(target, self.upper), self.lower)

@@ -22,13 +22,14 @@ from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.rl import curricula, events
 from rd_pipeline.rl.actions import ResidualActions, joint_semantics
 from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.observations import ActorInputs, actor_frame, actor_terms
+from rd_pipeline.rl.motion_command import MotionCommand
+from rd_pipeline.rl.observations import ActorInputs, CriticInputs, actor_frame, actor_terms, critic_observation
 from rd_pipeline.rl.physics import make_backend
 from rd_pipeline.rl.quat import rotate_inverse
 from rd_pipeline.rl.reward_terms import TermContext, TrackingState
 from rd_pipeline.rl.rewards import AdaptiveSigma, RewardManager
 from rd_pipeline.rl.sim_model import simulation_model
-from rd_pipeline.rl.terminations import bad_orientation, motion_far
+from rd_pipeline.rl.terminations import TerminationContext, failed
 from rd_pipeline.robots import Robot
 from rd_pipeline.sampling.sampler import SegmentSampler
 
@@ -50,11 +51,8 @@ class TrackingEnv:
     ) -> None:
         self.robot = robot
         self.config = config
-        self.sampler = sampler
         self.num_envs = config.num_envs
         self.rng = np.random.default_rng(seed)
-        self.segment_starts = torch.as_tensor(segment_starts)
-        self.segment_lengths = torch.as_tensor(segment_lengths)
         self.max_episode_length = reference.n_frames
         self.step_dt = config.physics_dt * config.decimation
         self.control_hz = 1.0 / self.step_dt
@@ -89,23 +87,9 @@ class TrackingEnv:
         feet = set(self.feet_sim.tolist())
         self.undesired = tensor([b for b in range(1, base.nbody) if b not in feet], torch.long)
         self.term_idx = tensor([tracked.index(b) for b in rc.termination_bodies], torch.long)
-
-        ref_bodies = [reference.body_names.index(b) for b in tracked]
-        root = reference.body_names.index(rc.root_body)
-        self.ref = events.ReferenceFrames(
-            root_pos=tensor(reference.root_pos),
-            root_quat=tensor(reference.root_quat),
-            root_quat_host=np.asarray(reference.root_quat, dtype=np.float32),
-            root_lin_vel=tensor(reference.body_lin_vel_w[:, root]),
-            root_ang_vel=tensor(reference.body_ang_vel_w[:, root]),
-            joint_pos=tensor(reference.joint_pos),
-            joint_vel=tensor(reference.joint_vel),
+        self.command = MotionCommand(
+            reference, tracked, rc.root_body, sampler, segment_starts, segment_lengths, self.num_envs, tensor
         )
-        self.ref_body_pos = tensor(reference.body_pos_w[:, ref_bodies])
-        self.ref_body_quat = tensor(reference.body_quat_w[:, ref_bodies])
-        self.ref_body_lin_vel = tensor(reference.body_lin_vel_w[:, ref_bodies])
-        self.ref_body_ang_vel = tensor(reference.body_ang_vel_w[:, ref_bodies])
-        self.ref_contact = tensor(reference.foot_contact, torch.bool)
 
         lower = tensor(robot.joint_range[:, 0])
         upper = tensor(robot.joint_range[:, 1])
@@ -128,10 +112,8 @@ class TrackingEnv:
         self.sigma = AdaptiveSigma(config.curricula.adaptive_sigma_alpha, self.rewards.tracking_sigmas(), device)
 
         n = self.num_envs
-        self.frame = torch.zeros(n, dtype=torch.long, device=device)
         # Episode bookkeeping lives on the host beside the random generator and the sampler: resets,
         # pushes and curricula then read one transfer per step, the done flags.
-        self.start_frame = torch.zeros(n, dtype=torch.long)
         self.episode_length_buf = torch.zeros(n, dtype=torch.long)
         self.action_history = torch.zeros(n, 3, self.num_actions, dtype=DTYPE, device=device)
         queue = config.randomization.max_delay_steps + 1
@@ -151,30 +133,27 @@ class TrackingEnv:
             return
         host_ids = env_ids.cpu()
         if frames is None:
-            segments = self.sampler.sample(len(host_ids))
-            offsets = torch.as_tensor(self.rng.random(len(host_ids))) * self.segment_lengths[segments]
-            frames = self.segment_starts[segments] + offsets.long()
-            frames = frames.clamp(max=self.max_episode_length - 2)
+            frames = self.command.sample_start_frames(len(host_ids), self.rng)
         else:
             frames = frames.cpu()
         model = self.backend.models[0]
+        ref = self.command.ref
         qpos, qvel = events.rsi_state(
-            self.config, self.ref, frames, model.nq, model.nv, self.qpos_idx, self.dof_idx, self.joint_range, self.rng
+            self.config, ref, frames, model.nq, model.nv, self.qpos_idx, self.dof_idx, self.joint_range, self.rng
         )
-        self.start_frame[host_ids] = frames
+        self.command.start(host_ids, frames)
         self.episode_length_buf[host_ids] = 0
         device_ids = host_ids.to(self.device)
         self.backend.set_state(device_ids, qpos, qvel)
-        self.frame[device_ids] = frames.to(self.device)
         self.action_history[device_ids] = 0.0
         self.feet_air_time[device_ids] = 0.0
         self.target_queue[device_ids] = qpos[:, self.qpos_idx].to(DTYPE)[:, None]
         if self.obs_frames is not None:
             self.obs_frames[device_ids] = self._actor_frame()[device_ids, None]
 
-    def _segment_of(self, frames: torch.Tensor) -> torch.Tensor:
-        """The sampler segment each reference frame lies in."""
-        return (torch.searchsorted(self.segment_starts, frames, right=True) - 1).clamp(min=0)
+    @property
+    def sampler(self) -> SegmentSampler:
+        return self.command.sampler
 
     # -- observations ------------------------------------------------------------------------
     def _state(self) -> dict[str, torch.Tensor]:
@@ -191,14 +170,14 @@ class TrackingEnv:
     def _actor_frame(self, st: dict[str, torch.Tensor] | None = None) -> torch.Tensor:
         """One actor frame from `st` (the current `_state()`, computed here when not given)."""
         st = self._state() if st is None else st
-        next_frame = (self.frame + 1).clamp(max=self.max_episode_length - 1)
+        next_frame = self.command.next_frame()
         inputs = ActorInputs(
             joint_pos=st["joint_pos"],
             joint_vel=st["joint_vel"],
             root_quat=st["root_quat"],
             base_ang_vel=st["base_ang_vel"],
             last_action=self.action_history[:, 0],
-            ref_joint_pos_next=self.ref.joint_pos[next_frame][:, self.policy_idx],
+            ref_joint_pos_next=self.command.ref.joint_pos[next_frame][:, self.policy_idx],
             default_pos=self.default_pos[self.policy_idx],
         )
         return actor_frame(self.actor_terms, inputs)
@@ -207,11 +186,16 @@ class TrackingEnv:
         if self.obs_frames is None:
             frame = self._actor_frame()
             self.obs_frames = frame[:, None].repeat(1, self.config.history, 1)
-        st = self._state()
-        root = self.term_context.root
-        ref = self.ref_body_pos[self.frame]
-        ref_rel = rotate_inverse(self.ref.root_quat[self.frame][:, None], ref - ref[:, root : root + 1])
-        critic = torch.cat([self.obs_frames[:, -1], st["base_lin_vel"], ref_rel.flatten(1), self.dr_params], dim=-1)
+        frame = self.command.frame
+        inputs = CriticInputs(
+            actor_frame=self.obs_frames[:, -1],
+            base_lin_vel=self._state()["base_lin_vel"],
+            ref_root_quat=self.command.ref.root_quat[frame],
+            ref_body_pos=self.command.body_pos[frame],
+            root=self.term_context.root,
+            dr_params=self.dr_params,
+        )
+        critic = critic_observation(inputs)
         return TensorDict({"policy": self.obs_frames.flatten(1), "critic": critic}, batch_size=[self.num_envs])
 
     # -- step --------------------------------------------------------------------------------
@@ -219,14 +203,14 @@ class TrackingEnv:
         actions = actions.to(DTYPE)
         before_vel = self._state()["joint_vel"]
         self.backend.step(self._delayed_targets(actions), self.config.decimation, self._disturbances())
-        self.frame = (self.frame + 1).clamp(max=self.max_episode_length - 1)
+        self.command.advance()
         self.episode_length_buf += 1
         self.action_history = torch.roll(self.action_history, 1, dims=1)
         self.action_history[:, 0] = actions
 
         current = self._state()
         state = self._tracking_state(current, actions, before_vel)
-        terminated = self._failed(state)
+        terminated = failed(state, self._termination_context())
         state.terminated = terminated
         rewards, terms, errors = self.rewards.compute(state, self.curriculum.penalty_scale, self.sigma.sigma())
         self.sigma.update(errors)
@@ -234,17 +218,13 @@ class TrackingEnv:
         # reach of PPO's clipped value loss (0.2 per update); at full scale the -200 termination
         # alone puts the values in the hundreds and the critic cannot follow.
         rewards = rewards * self.step_dt
-        time_out = self.frame >= self.max_episode_length - 1
+        time_out = self.command.time_out()
         dones = terminated | time_out
         # The one read from the device per step (mjlab and Isaac Lab read their reset ids too).
         flags = torch.stack([terminated, time_out]).cpu()
-        failed = flags[0]
         done_ids = torch.nonzero(flags.any(0)).flatten()
         lengths = self.episode_length_buf[done_ids]
-        end_frames = (self.start_frame[done_ids] + lengths).clamp(max=self.max_episode_length - 1)
-        start_segments = self._segment_of(self.start_frame[done_ids])
-        self.sampler.record(start_segments, self._segment_of(end_frames), failed[done_ids])
-        self.sampler.advance(1)
+        self.command.record_ends(done_ids, lengths, flags[0][done_ids])
         extras = {
             "time_outs": time_out & ~terminated,
             "log": {f"reward/{k}": v.mean() for k, v in terms.items()},
@@ -258,8 +238,7 @@ class TrackingEnv:
 
     def _delayed_targets(self, actions: torch.Tensor) -> torch.Tensor:
         """(N, J) PD targets of this step's actions, through each environment's control delay."""
-        next_frame = (self.frame + 1).clamp(max=self.max_episode_length - 1)
-        reference_next = self.ref.joint_pos[next_frame][:, self.policy_idx]
+        reference_next = self.command.ref.joint_pos[self.command.next_frame()][:, self.policy_idx]
         targets = self.default_pos.repeat(self.num_envs, 1)  # joints outside the policy hold their default
         targets[:, self.policy_idx] = self.actions.targets(actions, reference_next)
         self.target_queue = torch.roll(self.target_queue, 1, dims=1)
@@ -286,7 +265,8 @@ class TrackingEnv:
         self, st: dict[str, torch.Tensor], actions: torch.Tensor, before_vel: torch.Tensor
     ) -> TrackingState:
         s = self.backend.state
-        f = self.frame
+        command = self.command
+        f = command.frame
         threshold = self.config.contact_threshold_n
         force = s.contact_force[:, self.feet_sim].to(DTYPE)
         contact = force[..., 2] > threshold
@@ -302,14 +282,14 @@ class TrackingEnv:
             body_ang_vel=body_vel[..., :3],
             joint_pos=st["joint_pos"],
             joint_vel=st["joint_vel"],
-            ref_body_pos=self.ref_body_pos[f],
-            ref_body_quat=self.ref_body_quat[f],
-            ref_body_lin_vel=self.ref_body_lin_vel[f],
-            ref_body_ang_vel=self.ref_body_ang_vel[f],
-            ref_joint_pos=self.ref.joint_pos[f][:, self.policy_idx],
-            ref_joint_vel=self.ref.joint_vel[f][:, self.policy_idx],
+            ref_body_pos=command.body_pos[f],
+            ref_body_quat=command.body_quat[f],
+            ref_body_lin_vel=command.body_lin_vel[f],
+            ref_body_ang_vel=command.body_ang_vel[f],
+            ref_joint_pos=command.ref.joint_pos[f][:, self.policy_idx],
+            ref_joint_vel=command.ref.joint_vel[f][:, self.policy_idx],
             feet_contact=contact,
-            ref_feet_contact=self.ref_contact[f],
+            ref_feet_contact=command.contact[f],
             feet_air_time=touchdown_air_time,
             feet_force=force,
             feet_speed=feet_vel[..., 3:5].norm(dim=-1),
@@ -322,22 +302,18 @@ class TrackingEnv:
             terminated=torch.zeros(self.num_envs, dtype=torch.bool, device=self.device),
         )
 
-    def _failed(self, state: TrackingState) -> torch.Tensor:
-        """Motion far (a termination body too far from its reference) or root tilt error."""
-        far = motion_far(
-            state.body_pos[:, self.term_idx], state.ref_body_pos[:, self.term_idx], self.curriculum.motion_far_m
+    def _termination_context(self) -> TerminationContext:
+        return TerminationContext(
+            self.config.terminations, self.term_context.root, self.term_idx, self.curriculum.motion_far_m
         )
-        root = self.term_context.root
-        limit = self.config.terminations.orientation_limit_rad
-        return far | bad_orientation(state.body_quat[:, root], state.ref_body_quat[:, root], limit)
 
     # -- checkpoints -------------------------------------------------------------------------
     def state_dict(self) -> dict:
         """Everything a resumed run needs to continue exactly: physics states, buffers, curricula, RNG."""
         return {
             "physics": self.backend.get_states(),
-            "frame": self.frame.clone(),
-            "start_frame": self.start_frame.clone(),
+            "frame": self.command.frame.clone(),
+            "start_frame": self.command.start_frame.clone(),
             "episode_length": self.episode_length_buf.clone(),
             "action_history": self.action_history.clone(),
             "target_queue": self.target_queue.clone(),
@@ -354,8 +330,8 @@ class TrackingEnv:
         device = lambda name: state[name].to(self.device).clone()
         host = lambda name: state[name].cpu().clone()
         self.backend.set_states(state["physics"])
-        self.frame = device("frame")
-        self.start_frame = host("start_frame")
+        self.command.frame = device("frame")
+        self.command.start_frame = host("start_frame")
         self.episode_length_buf = host("episode_length")
         self.action_history = device("action_history")
         self.target_queue = device("target_queue")

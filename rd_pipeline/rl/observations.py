@@ -11,7 +11,7 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 from rd_pipeline.lazy import lazy_import
-from rd_pipeline.rl.quat import projected_gravity
+from rd_pipeline.rl.quat import projected_gravity, rotate_inverse
 
 torch = lazy_import("torch")
 
@@ -110,6 +110,44 @@ def actor_terms(num_joints: int, num_actions: int, cfg: ObservationsCfg) -> tupl
 def actor_frame(terms: tuple[ObservationTerm, ...], inputs: ActorInputs) -> torch.Tensor:
     """(N, frame_size): every term's scaled value, concatenated in layout order."""
     return torch.cat([term.scale * ACTOR_TERMS[term.name](inputs) for term in terms], dim=-1)
+
+
+@dataclass(frozen=True)
+class CriticInputs:
+    """Raw quantities the critic terms read: the actor's newest frame plus privileged state."""
+
+    actor_frame: torch.Tensor
+    """(N, frame_size) the newest actor frame."""
+    base_lin_vel: torch.Tensor
+    """(N, 3) pelvis linear velocity, pelvis frame."""
+    ref_root_quat: torch.Tensor
+    """(N, 4) the reference root orientation at the current frame, wxyz."""
+    ref_body_pos: torch.Tensor
+    """(N, B, 3) the reference's tracked body positions at the current frame (world)."""
+    root: int
+    """Index of the root among the tracked bodies."""
+    dr_params: torch.Tensor
+    """(N, 9) each environment's domain-randomization draw."""
+
+
+def ref_body_pos_rel(x: CriticInputs) -> torch.Tensor:
+    """The reference's tracked bodies relative to its root, in the root's frame, flattened."""
+    relative = x.ref_body_pos - x.ref_body_pos[:, x.root : x.root + 1]
+    return rotate_inverse(x.ref_root_quat[:, None], relative).flatten(1)
+
+
+CRITIC_TERMS: dict[str, Callable[[CriticInputs], torch.Tensor]] = {
+    "actor_frame": lambda x: x.actor_frame,
+    "base_lin_vel": lambda x: x.base_lin_vel,
+    "ref_body_pos_rel": ref_body_pos_rel,
+    "dr_params": lambda x: x.dr_params,
+}
+"""Term name -> function, in the order of the critic's observation."""
+
+
+def critic_observation(inputs: CriticInputs) -> torch.Tensor:
+    """(N, critic_size): every critic term, concatenated in order."""
+    return torch.cat([term(inputs) for term in CRITIC_TERMS.values()], dim=-1)
 
 
 def layout_json(terms: tuple[ObservationTerm, ...], history: int) -> dict:

@@ -6,6 +6,7 @@ penalty magnitude (regularization terms); `rd_pipeline.rl.rewards` weighs and su
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from rd_pipeline.lazy import lazy_import
@@ -141,6 +142,25 @@ class SoftLimitTerm(PenaltyTerm):
     """Fraction of the platform limit (of the range, for positions) where the penalty starts."""
 
 
+GROUPS: tuple[str, ...] = ("body", "root", "joint", "contact", "regularization")
+"""The critic's value heads, in column order."""
+
+REWARD_TERMS: dict[str, tuple[Callable[..., torch.Tensor], str]] = {}
+"""Term name -> (function, the value head it feeds), filled by `@reward_term`."""
+
+
+def reward_term(group: str) -> Callable[[Callable[..., torch.Tensor]], Callable[..., torch.Tensor]]:
+    """Register a term function under its name, feeding the critic head `group`."""
+    if group not in GROUPS:
+        raise ValueError(f"unknown reward group '{group}' (groups: {', '.join(GROUPS)})")
+
+    def register(function: Callable[..., torch.Tensor]) -> Callable[..., torch.Tensor]:
+        REWARD_TERMS[function.__name__] = (function, group)
+        return function
+
+    return register
+
+
 def _sq(x: torch.Tensor) -> torch.Tensor:
     return (x * x).sum(dim=-1)
 
@@ -162,65 +182,80 @@ def _excess(value: torch.Tensor, limit: torch.Tensor) -> torch.Tensor:
 # Term functions: (state, context, term config) -> (N,) error (tracking) or penalty magnitude.
 
 
+@reward_term("body")
 def body_pos(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     return _sq(s.body_pos - s.ref_body_pos).mean(-1)
 
 
+@reward_term("body")
 def body_pos_rel(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     return _sq(_relative(s.body_pos, c.root) - _relative(s.ref_body_pos, c.root)).mean(-1)
 
 
+@reward_term("body")
 def keypoint_pos(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     return _sq((s.body_pos - s.ref_body_pos)[:, list(c.keypoints)]).mean(-1)
 
 
+@reward_term("body")
 def keypoint_pos_rel(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     error = _relative(s.body_pos, c.root) - _relative(s.ref_body_pos, c.root)
     return _sq(error[:, list(c.keypoints)]).mean(-1)
 
 
+@reward_term("body")
 def feet_pos(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     return _sq((s.body_pos - s.ref_body_pos)[:, list(c.feet)]).mean(-1)
 
 
+@reward_term("body")
 def feet_pos_rel(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     error = _relative(s.body_pos, c.root) - _relative(s.ref_body_pos, c.root)
     return _sq(error[:, list(c.feet)]).mean(-1)
 
 
+@reward_term("body")
 def body_orientation(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     return quat_angle(s.body_quat, s.ref_body_quat).square().mean(-1)
 
 
+@reward_term("body")
 def body_lin_vel(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     return _sq(s.body_lin_vel - s.ref_body_lin_vel).mean(-1)
 
 
+@reward_term("body")
 def body_ang_vel(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     return _sq(s.body_ang_vel - s.ref_body_ang_vel).mean(-1)
 
 
+@reward_term("root")
 def root_pos(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     return _sq(s.body_pos[:, c.root] - s.ref_body_pos[:, c.root])
 
 
+@reward_term("root")
 def root_orientation(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     return quat_angle(s.body_quat[:, c.root], s.ref_body_quat[:, c.root]).square()
 
 
+@reward_term("joint")
 def joint_pos(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     return _sq(s.joint_pos - s.ref_joint_pos)
 
 
+@reward_term("joint")
 def joint_vel(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     return _sq(s.joint_vel - s.ref_joint_vel)
 
 
+@reward_term("contact")
 def contact_mask(s: TrackingState, c: TermContext, cfg: TrackingTerm) -> torch.Tensor:
     """The fraction of feet whose contact state disagrees with the reference."""
     return (s.feet_contact != s.ref_feet_contact).float().mean(-1)
 
 
+@reward_term("contact")
 def feet_air_time(s: TrackingState, c: TermContext, cfg: AirTimeTerm) -> torch.Tensor:
     """At touchdown, the air time beyond the threshold, for feet the reference also has on the
     ground: real steps pay, shuffling or hopping off-reference does not."""
@@ -228,39 +263,48 @@ def feet_air_time(s: TrackingState, c: TermContext, cfg: AirTimeTerm) -> torch.T
     return ((s.feet_air_time - cfg.threshold_s) * landed).sum(-1)
 
 
+@reward_term("regularization")
 def torque(s: TrackingState, c: TermContext, cfg: PenaltyTerm) -> torch.Tensor:
     return _sq(s.torque)
 
 
+@reward_term("regularization")
 def dof_vel(s: TrackingState, c: TermContext, cfg: PenaltyTerm) -> torch.Tensor:
     return _sq(s.joint_vel)
 
 
+@reward_term("regularization")
 def dof_acc(s: TrackingState, c: TermContext, cfg: PenaltyTerm) -> torch.Tensor:
     return _sq(s.joint_acc)
 
 
+@reward_term("regularization")
 def action_rate(s: TrackingState, c: TermContext, cfg: PenaltyTerm) -> torch.Tensor:
     return _sq(s.action - s.last_action)
 
 
+@reward_term("regularization")
 def action_smoothness(s: TrackingState, c: TermContext, cfg: PenaltyTerm) -> torch.Tensor:
     return _sq(s.action - 2 * s.last_action + s.second_last_action)
 
 
+@reward_term("regularization")
 def foot_contact_force(s: TrackingState, c: TermContext, cfg: FootForceTerm) -> torch.Tensor:
     return (s.feet_force.norm(dim=-1) - cfg.max_force_n).clamp(min=0.0).sum(-1)
 
 
+@reward_term("regularization")
 def stumble(s: TrackingState, c: TermContext, cfg: StumbleTerm) -> torch.Tensor:
     sideways = s.feet_force[..., :2].norm(dim=-1)
     return (sideways > cfg.ratio * s.feet_force[..., 2].abs()).any(-1).float()
 
 
+@reward_term("regularization")
 def slippage(s: TrackingState, c: TermContext, cfg: PenaltyTerm) -> torch.Tensor:
     return (s.feet_speed.square() * s.feet_contact).sum(-1)
 
 
+@reward_term("regularization")
 def dof_pos_limits(s: TrackingState, c: TermContext, cfg: SoftLimitTerm) -> torch.Tensor:
     middle = (c.joint_upper + c.joint_lower) / 2
     half = (c.joint_upper - c.joint_lower) / 2
@@ -269,17 +313,21 @@ def dof_pos_limits(s: TrackingState, c: TermContext, cfg: SoftLimitTerm) -> torc
     return ((lower - s.joint_pos).clamp(min=0) + (s.joint_pos - upper).clamp(min=0)).sum(-1)
 
 
+@reward_term("regularization")
 def dof_vel_limits(s: TrackingState, c: TermContext, cfg: SoftLimitTerm) -> torch.Tensor:
     return _excess(s.joint_vel, cfg.soft_fraction * c.velocity_limit)
 
 
+@reward_term("regularization")
 def torque_limits(s: TrackingState, c: TermContext, cfg: SoftLimitTerm) -> torch.Tensor:
     return _excess(s.torque, cfg.soft_fraction * c.effort_limit)
 
 
+@reward_term("regularization")
 def termination(s: TrackingState, c: TermContext, cfg: PenaltyTerm) -> torch.Tensor:
     return s.terminated.float()
 
 
+@reward_term("regularization")
 def collision(s: TrackingState, c: TermContext, cfg: PenaltyTerm) -> torch.Tensor:
     return s.undesired_contacts.float()

@@ -1,5 +1,7 @@
-"""Reward terms of the paper's reward table: pure torch functions of a batched tracking state, each
-configured by a frozen dataclass (weight, sigma, thresholds) that is a field of `RewardsCfg`.
+"""Reward terms of the paper's reward table: pure torch functions of a batched tracking state
+(`reward_terms.py`, each registered with the critic head it feeds), each configured by a frozen
+dataclass (weight, sigma, thresholds) that is a field of `RewardsCfg` named after its function. A
+new term is one registered function plus its field.
 
 Tracking terms are Gaussian kernels w * exp(-e / sigma^2) of a mean squared error e; regularization
 terms are penalties w * P (w < 0) scaled by the penalty curriculum. Every term belongs to a group,
@@ -9,12 +11,12 @@ and each group is one value head of the critic.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from dataclasses import dataclass
 
 from rd_pipeline.lazy import lazy_import
-from rd_pipeline.rl import reward_terms as terms
 from rd_pipeline.rl.reward_terms import (
+    GROUPS,
+    REWARD_TERMS,
     AirTimeTerm,
     FootForceTerm,
     PenaltyTerm,
@@ -91,47 +93,15 @@ class RewardsCfg:
     """Bodies other than the feet touching anything."""
 
 
-REWARD_TERMS: dict[str, tuple[Callable[..., torch.Tensor], str]] = {
-    "body_pos": (terms.body_pos, "body"),
-    "body_pos_rel": (terms.body_pos_rel, "body"),
-    "keypoint_pos": (terms.keypoint_pos, "body"),
-    "keypoint_pos_rel": (terms.keypoint_pos_rel, "body"),
-    "feet_pos": (terms.feet_pos, "body"),
-    "feet_pos_rel": (terms.feet_pos_rel, "body"),
-    "body_orientation": (terms.body_orientation, "body"),
-    "body_lin_vel": (terms.body_lin_vel, "body"),
-    "body_ang_vel": (terms.body_ang_vel, "body"),
-    "root_pos": (terms.root_pos, "root"),
-    "root_orientation": (terms.root_orientation, "root"),
-    "joint_pos": (terms.joint_pos, "joint"),
-    "joint_vel": (terms.joint_vel, "joint"),
-    "contact_mask": (terms.contact_mask, "contact"),
-    "feet_air_time": (terms.feet_air_time, "contact"),
-    "torque": (terms.torque, "regularization"),
-    "dof_vel": (terms.dof_vel, "regularization"),
-    "dof_acc": (terms.dof_acc, "regularization"),
-    "action_rate": (terms.action_rate, "regularization"),
-    "action_smoothness": (terms.action_smoothness, "regularization"),
-    "foot_contact_force": (terms.foot_contact_force, "regularization"),
-    "stumble": (terms.stumble, "regularization"),
-    "slippage": (terms.slippage, "regularization"),
-    "dof_pos_limits": (terms.dof_pos_limits, "regularization"),
-    "dof_vel_limits": (terms.dof_vel_limits, "regularization"),
-    "torque_limits": (terms.torque_limits, "regularization"),
-    "termination": (terms.termination, "regularization"),
-    "collision": (terms.collision, "regularization"),
-}
-"""Term name -> (function, the critic value head it feeds)."""
-
-GROUPS: tuple[str, ...] = tuple(dict.fromkeys(group for _, group in REWARD_TERMS.values()))
-
-
 class RewardManager:
     """Evaluates the configured terms and sums them per group (one column per critic head)."""
 
     def __init__(self, cfg: RewardsCfg, context: TermContext) -> None:
         self.context = context
         self.terms = [(f.name, getattr(cfg, f.name)) for f in dataclasses.fields(cfg)]
+        unknown = [name for name, _ in self.terms if name not in REWARD_TERMS]
+        if unknown:
+            raise KeyError(f"reward terms without a registered function: {', '.join(unknown)}")
 
     def tracking_sigmas(self) -> dict[str, float]:
         """Table sigma of each tracking term (the adaptive-sigma origins)."""

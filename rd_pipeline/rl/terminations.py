@@ -1,15 +1,19 @@
 """Termination terms: when a tracking episode (training) or a rollout (sim2sim) has failed.
 
-Pure torch functions of robot and reference state, shared by the training environment and the
-validation deploy loop so both judge failure the same way.
+`motion_far` and `bad_orientation` are pure torch functions of robot and reference state, shared by
+the training environment and the validation deploy loop so both judge failure the same way. The
+training environment ends an episode when any registered term fires: a new termination is one
+`@termination_term` function here, reading its thresholds from `TerminationsCfg`.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from rd_pipeline.lazy import lazy_import
 from rd_pipeline.rl.quat import projected_gravity
+from rd_pipeline.rl.reward_terms import TrackingState
 
 torch = lazy_import("torch")
 
@@ -39,3 +43,50 @@ def bad_orientation(root_quat: torch.Tensor, ref_root_quat: torch.Tensor, limit_
     """(N,) True where the root's gravity direction is more than `limit_rad` from the reference's."""
     cosine = (projected_gravity(root_quat) * projected_gravity(ref_root_quat)).sum(-1)
     return torch.acos(cosine.clamp(-1.0, 1.0)) > limit_rad
+
+
+@dataclass(frozen=True)
+class TerminationContext:
+    """What the termination terms read besides the tracking state."""
+
+    config: TerminationsCfg
+    """The thresholds."""
+    root: int
+    """Index of the root among the tracked bodies."""
+    bodies: torch.Tensor
+    """Indices of the termination bodies among the tracked bodies."""
+    motion_far_m: float
+    """The motion-far distance the curriculum has reached."""
+
+
+TerminationTerm = Callable[[TrackingState, TerminationContext], "torch.Tensor"]
+
+TERMINATION_TERMS: dict[str, TerminationTerm] = {}
+"""Term name -> function, in the order they are evaluated."""
+
+
+def termination_term(function: TerminationTerm) -> TerminationTerm:
+    """Register `function` as a termination term under its name."""
+    TERMINATION_TERMS[function.__name__] = function
+    return function
+
+
+@termination_term
+def far_from_motion(s: TrackingState, c: TerminationContext) -> torch.Tensor:
+    """A termination body farther than the curriculum's motion-far distance from its reference."""
+    return motion_far(s.body_pos[:, c.bodies], s.ref_body_pos[:, c.bodies], c.motion_far_m)
+
+
+@termination_term
+def root_tilted(s: TrackingState, c: TerminationContext) -> torch.Tensor:
+    """The root's gravity direction too far from the reference's."""
+    return bad_orientation(s.body_quat[:, c.root], s.ref_body_quat[:, c.root], c.config.orientation_limit_rad)
+
+
+def failed(state: TrackingState, context: TerminationContext) -> torch.Tensor:
+    """(N,) True where any termination term fires."""
+    terms = iter(TERMINATION_TERMS.values())
+    result = next(terms)(state, context)
+    for term in terms:
+        result = result | term(state, context)
+    return result
