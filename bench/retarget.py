@@ -30,11 +30,11 @@ from rd_pipeline import paths
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.retarget.quality import retarget_quality
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
-from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.robots import Robot, load_robot
-from rd_pipeline.stages.import_motion import ImportParams
+from rd_pipeline.stages.import_motion import ImportConfig
 
 
 def shared_takes() -> list[str]:
@@ -134,7 +134,7 @@ def _measure(robot_name: str, motion: str, cores) -> dict:
 
 
 def _retarget_and_score(robot_name: str, motion: str) -> dict:
-    import_params = ImportParams()
+    import_params = ImportConfig()
     human = human_motion_from_bvh(read_bvh(paths.bvh_path(motion)), LAFAN_CM_TO_M, LAFAN_TO_Z_UP)
     robot = load_robot(robot_name)
     result, ours, seconds = retarget_and_score(human, robot)
@@ -167,12 +167,12 @@ def _retarget_and_score(robot_name: str, motion: str) -> dict:
 
 
 def retarget_and_score(
-    human: HumanMotion, robot: Robot, params: RetargetParams | None = None
+    human: HumanMotion, robot: Robot, params: RetargetConfig | None = None
 ) -> tuple[RetargetResult, dict, float]:
     """Retarget `human` onto `robot`, timed, and score it against the scaled human: the result, the
     quality report (with throughput and the pelvis-off-target share) and the seconds it took."""
     began = time.perf_counter()
-    result = retarget(human, robot, params or RetargetParams())
+    result = retarget(human, robot, params or RetargetConfig())
     seconds = time.perf_counter() - began
     targets = result.targets
     quality = retarget_quality(

@@ -13,7 +13,7 @@ REFERENCE_STAGES = ("retarget", "import")
 
 
 @dataclass(frozen=True)
-class ExportParams:
+class ExportConfig:
     """Which checkpoint goes to the robot."""
 
     checkpoint: int = 0
@@ -82,7 +82,7 @@ STAGE = Stage(
     name="export",
     version=4,
     description="trained actor -> policy.pt (TorchScript) + policy.json (gains, scales, mask, obs layout, rates)",
-    params=ExportParams,
+    params=ExportConfig,
     provides="deployable_policy",
     run=_run,
     inputs=lambda robot, motion: model_files(robot),

@@ -16,7 +16,7 @@ from rd_pipeline.robots.assets import model_files
 
 
 @dataclass(frozen=True)
-class ImportParams:
+class ImportConfig:
     """Resampling of the dataset CSV and foot-contact labelling."""
 
     source_fps: float = 30.0
@@ -80,7 +80,7 @@ STAGE = Stage(
     name="import",
     version=3,
     description="LAFAN1_Retargeting_Dataset CSV -> robot reference motion at 50 Hz",
-    params=ImportParams,
+    params=ImportConfig,
     provides="reference",
     run=_run,
     inputs=_inputs,

@@ -14,7 +14,7 @@ from rd_pipeline.motion.lafan import LAFAN_CM_TO_M
 
 
 @dataclass(frozen=True)
-class ParseParams:
+class ParseConfig:
     """How BVH units map to the pipeline's world."""
 
     length_unit_m: float = LAFAN_CM_TO_M
@@ -51,7 +51,7 @@ STAGE = Stage(
     name="parse",
     version=1,
     description="LAFAN1 BVH -> human motion (Z-up, metres)",
-    params=ParseParams,
+    params=ParseConfig,
     provides="human_motion",
     run=_run,
     inputs=_inputs,

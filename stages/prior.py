@@ -11,7 +11,7 @@ PLOT_FILE = "balancing.png"
 
 
 @dataclass(frozen=True)
-class PriorParams:
+class PriorConfig:
     """The solve."""
 
     solver: str = "CLARABEL"
@@ -58,7 +58,7 @@ STAGE = Stage(
     name="prior",
     version=1,
     description="segment histograms -> balanced prior w* (CVXPY, simplex) + before/after plot",
-    params=PriorParams,
+    params=PriorConfig,
     provides="sampling_prior",
     run=_run,
     requires=("segment_stats",),

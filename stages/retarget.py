@@ -7,7 +7,7 @@ import time
 from typing import Any
 
 from rd_pipeline.artifacts.stage import Stage, StageContext
-from rd_pipeline.retarget.settings import RetargetParams
+from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.robots.assets import model_files
 
 
@@ -26,7 +26,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.retarget.targets import TARGETS_FILE
     from rd_pipeline.robots import load_robot
 
-    p: RetargetParams = ctx.params
+    p: RetargetConfig = ctx.params
     robot = load_robot(ctx.robot)
     human = HumanMotion.load(ctx.upstream["human_motion"].path / HUMAN_MOTION_FILE)
     began = time.perf_counter()
@@ -61,7 +61,7 @@ STAGE = Stage(
     name="retarget",
     version=8,
     description="human motion -> robot reference motion at 50 Hz (mink IK) + quality.json",
-    params=RetargetParams,
+    params=RetargetConfig,
     provides="reference",
     run=_run,
     inputs=lambda robot, motion: model_files(robot),

@@ -14,7 +14,7 @@ SUMMARY_FILE = "stats.json"
 
 
 @dataclass(frozen=True)
-class StatsParams:
+class StatsConfig:
     """Segmentation and histogram settings."""
 
     segment_s: float = 1.0
@@ -32,7 +32,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.sampling.plots import plot_segment_statistics
     from rd_pipeline.sampling.segments import SEGMENTS_FILE, segment_statistics, std_ranking
 
-    p: StatsParams = ctx.params
+    p: StatsConfig = ctx.params
     robot = load_robot(ctx.robot)
     config = robot.config
     reference = ReferenceMotion.load(ctx.upstream["reference"].path / REFERENCE_FILE)
@@ -73,7 +73,7 @@ STAGE = Stage(
     name="stats",
     version=1,
     description="reference -> 1 s segments, joint std, hip/knee-pitch histograms, plot",
-    params=StatsParams,
+    params=StatsConfig,
     provides="segment_stats",
     run=_run,
     inputs=lambda robot, motion: model_files(robot),

@@ -15,9 +15,9 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.contact import contact_runs
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
+from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.retarget.quality import retarget_quality
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
-from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.robots import load_robot
 
 SPEC_QUALITY_KEYS = {
@@ -42,7 +42,7 @@ def _human(motion: str, seconds: float | None = None) -> HumanMotion:
 
 
 def _retarget(robot: str, human: HumanMotion) -> RetargetResult:
-    return retarget(human, load_robot(robot), RetargetParams())
+    return retarget(human, load_robot(robot), RetargetConfig())
 
 
 @pytest.fixture(scope="module")
@@ -137,7 +137,7 @@ def test_retarget_map_with_an_unknown_human_joint() -> None:
     )
     broken = dataclasses.replace(robot, config=config)
     with pytest.raises(PipelineError, match=r"bodies.retarget names human joint 'LeftElbow', not in the skeleton"):
-        retarget(_human("dance1_subject2", seconds=1.0), broken, RetargetParams())
+        retarget(_human("dance1_subject2", seconds=1.0), broken, RetargetConfig())
 
 
 @pytest.mark.slow
@@ -158,8 +158,8 @@ def test_stage_writes_reference_and_quality(artifacts: Path) -> None:
 
 
 def test_lagging_windows_are_padded_merged_and_off_at_zero_ratio() -> None:
+    from rd_pipeline.retarget.config import LagRepair
     from rd_pipeline.retarget.repair import RepairWindow, lagging_windows
-    from rd_pipeline.retarget.settings import LagRepair
 
     errors = np.full(200, 0.05)
     errors[[40, 41, 60, 150]] = 0.30  # 0.30 > max(2 x 0.05, 0.05 + 0.1)
@@ -180,7 +180,7 @@ def test_frames_visited_backward_get_their_own_task_costs() -> None:
     from rd_pipeline.robots.hulls import BodyHulls
 
     robot = load_robot("g1")
-    params = RetargetParams()
+    params = RetargetConfig()
     feet = FootMeshes.from_robot(robot)
     human = _human("dance1_subject2", seconds=8.0)
     targets = build_targets(human, robot, params.fps, feet.vertices, params.contact, params.shape, params.body_contact)

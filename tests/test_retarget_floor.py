@@ -17,9 +17,9 @@ from scipy.spatial.transform import Rotation
 
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
+from rd_pipeline.retarget.config import LagRepair, RetargetConfig
 from rd_pipeline.retarget.quality import quality_series, summarize_quality
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
-from rd_pipeline.retarget.settings import LagRepair, RetargetParams
 from rd_pipeline.robots import load_robot
 from rd_pipeline.robots.hulls import BodyHulls
 
@@ -44,7 +44,7 @@ def _excerpt(motion: str, start_s: float, end_s: float) -> HumanMotion:
 def excerpt(request) -> tuple[str, RetargetResult, dict, dict]:
     motion, start_s, end_s = EXCERPTS[request.param]
     robot = load_robot("g1")
-    result = retarget(_excerpt(motion, start_s, end_s), robot, RetargetParams())
+    result = retarget(_excerpt(motion, start_s, end_s), robot, RetargetConfig())
     targets = result.targets
     series = quality_series(robot, result.reference, targets.positions, targets.bodies, targets.human_pelvis)
     return request.param, result, series, summarize_quality(robot, result.reference, series)
@@ -123,8 +123,8 @@ def test_a_stretch_stuck_on_the_wrong_branch_is_solved_again() -> None:
     human = _excerpt("ground2_subject2", 61.0, 70.0)
     robot = load_robot("g1")
     figures = {}
-    for ratio in (0.0, RetargetParams().repair.error_ratio):
-        params = dataclasses.replace(RetargetParams(), repair=dataclasses.replace(LagRepair(), error_ratio=ratio))
+    for ratio in (0.0, RetargetConfig().repair.error_ratio):
+        params = dataclasses.replace(RetargetConfig(), repair=dataclasses.replace(LagRepair(), error_ratio=ratio))
         result = retarget(human, robot, params)
         targets = result.targets
         series = quality_series(robot, result.reference, targets.positions, targets.bodies, targets.human_pelvis)

@@ -15,9 +15,9 @@ from conftest import LAFAN_DIR
 
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
+from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.retarget.legs import keep_legs_reachable
 from rd_pipeline.retarget.quality import FootMeshes
-from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.retarget.targets import build_targets
 from rd_pipeline.robots import load_robot
 
@@ -93,7 +93,7 @@ def test_a_body_lying_on_its_side_keeps_its_trunk_targets_above_the_floor() -> N
     frames = slice(int(62.0 * human.fps), int(70.0 * human.fps))
     human = dataclasses.replace(human, pos_w=human.pos_w[frames], quat_w=human.quat_w[frames])
     robot = load_robot("g1")
-    params = RetargetParams()
+    params = RetargetConfig()
     feet = FootMeshes.from_robot(robot).vertices
     targets = build_targets(human, robot, params.fps, feet, params.contact, params.shape, params.body_contact)
     trunk = [targets.bodies.index(body) for body in ("pelvis", "left_hip_roll_link", "right_hip_roll_link")]

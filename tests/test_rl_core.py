@@ -15,9 +15,9 @@ from rd_pipeline.rl.actions import RESIDUAL_PRESETS, ActionConfig, ResidualActio
 from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
 from rd_pipeline.rl.physics import MujocoCpuBackend
 from rd_pipeline.rl.reward_terms import PenaltyTerm, TermContext, TrackingState
-from rd_pipeline.rl.rewards import GROUPS, AdaptiveSigma, RewardManager, RewardsCfg
+from rd_pipeline.rl.rewards import GROUPS, AdaptiveSigma, RewardManager, RewardsConfig
 from rd_pipeline.rl.sim_model import simulation_model
-from rd_pipeline.rl.terminations import TerminationContext, TerminationsCfg
+from rd_pipeline.rl.terminations import TerminationContext, TerminationsConfig
 from rd_pipeline.robots import load_robot
 
 N, B, P = 3, 5, 4
@@ -69,7 +69,7 @@ CONTEXT = TermContext(
     velocity_limit=torch.full((P,), 10.0, dtype=torch.float64),
     effort_limit=torch.full((P,), 50.0, dtype=torch.float64),
 )
-MANAGER = RewardManager(RewardsCfg(), CONTEXT)
+MANAGER = RewardManager(RewardsConfig(), CONTEXT)
 
 
 def compute_rewards(state, penalty_scale, sigma=None):
@@ -305,7 +305,7 @@ def test_a_new_reward_term_is_one_registered_function_plus_its_field(monkeypatch
         return (s.joint_pos - s.ref_joint_pos).abs().sum(-1)
 
     extended = dataclasses.make_dataclass(
-        "Extended", [("joint_pos_abs", PenaltyTerm, PenaltyTerm(-1.0))], bases=(RewardsCfg,), frozen=True
+        "Extended", [("joint_pos_abs", PenaltyTerm, PenaltyTerm(-1.0))], bases=(RewardsConfig,), frozen=True
     )
     joints = _state().joint_pos.clone()
     joints[:, 0] += 0.2
@@ -315,14 +315,14 @@ def test_a_new_reward_term_is_one_registered_function_plus_its_field(monkeypatch
     joint = GROUPS.index("joint")
     assert torch.allclose(groups[:, joint] - plain[:, joint], torch.full((N,), -0.2, dtype=torch.float64))
     unregistered = dataclasses.make_dataclass(
-        "Unregistered", [("joint_pos_sq", PenaltyTerm, PenaltyTerm(-1.0))], bases=(RewardsCfg,), frozen=True
+        "Unregistered", [("joint_pos_sq", PenaltyTerm, PenaltyTerm(-1.0))], bases=(RewardsConfig,), frozen=True
     )
     with pytest.raises(KeyError, match="reward terms without a registered function: joint_pos_sq"):
         RewardManager(unregistered(), CONTEXT)
 
 
 def test_an_episode_fails_when_any_termination_term_fires(monkeypatch: pytest.MonkeyPatch) -> None:
-    config = TerminationsCfg()
+    config = TerminationsConfig()
     context = TerminationContext(config, root=0, bodies=torch.tensor([1, 2]), motion_far_m=0.5)
     on_reference = _state()
     assert terminations.failed(on_reference, context).tolist() == [False] * N

@@ -14,7 +14,7 @@ from tensordict import TensorDict
 
 from rd_pipeline.policy_spec import FORMAT_VERSION, PolicySpec
 from rd_pipeline.rl.actions import joint_semantics
-from rd_pipeline.rl.observations import ObservationsCfg, actor_terms, layout_json
+from rd_pipeline.rl.observations import ObservationsConfig, actor_terms, layout_json
 from rd_pipeline.robots import Robot
 
 
@@ -53,7 +53,7 @@ def build_policy_spec(
     outputs = [joint for joint, kind in zip(policy, semantics) if kind != "reference"]
     if len(outputs) != num_actions:
         raise ValueError(f"the checkpoint's actor has {num_actions} outputs, the action mode implies {len(outputs)}")
-    terms = actor_terms(len(policy), num_actions, ObservationsCfg(**env["observations"]))
+    terms = actor_terms(len(policy), num_actions, ObservationsConfig(**env["observations"]))
     floats = lambda values: [float(v) for v in values]
     return PolicySpec(
         {

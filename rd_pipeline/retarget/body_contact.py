@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from rd_pipeline.motion.contact import contact_runs, label_contacts
-from rd_pipeline.retarget.settings import BodyContactSettings
+from rd_pipeline.retarget.config import BodyContactConfig
 from rd_pipeline.retarget.smoothing import smoothstep
 
 
@@ -15,7 +15,7 @@ def label_body_contacts(
     index: dict[str, int],
     joints: list[str],
     fps: float,
-    settings: BodyContactSettings,
+    settings: BodyContactConfig,
 ) -> np.ndarray:
     """(T, K) which of `joints` rest on the floor (z = 0 in LAFAN1), from each joint's height and speed.
 

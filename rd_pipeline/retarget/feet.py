@@ -8,8 +8,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from rd_pipeline.motion.contact import contact_runs
+from rd_pipeline.retarget.config import PlantDrift
 from rd_pipeline.retarget.frames import yaw_and_pitch, yaw_pitch_frame
-from rd_pipeline.retarget.settings import PlantDrift
 from rd_pipeline.retarget.smoothing import smoothstep
 from rd_pipeline.robots import Robot
 

@@ -11,9 +11,9 @@ import numpy as np
 from scipy.ndimage import maximum_filter1d
 from scipy.spatial.transform import Rotation
 
+from rd_pipeline.retarget.config import IkConfig, IkWeights
 from rd_pipeline.retarget.floor import FloorLimit
 from rd_pipeline.retarget.limits import FrameStepLimit
-from rd_pipeline.retarget.settings import IkSettings, IkWeights
 from rd_pipeline.retarget.smoothing import smoothstep
 from rd_pipeline.retarget.targets import RetargetTargets
 from rd_pipeline.robots import Robot
@@ -29,7 +29,7 @@ class RetargetIk:
         robot: Robot,
         targets: RetargetTargets,
         weights: IkWeights,
-        settings: IkSettings,
+        settings: IkConfig,
         hulls: BodyHulls,
     ) -> None:
         self.robot = robot
@@ -291,7 +291,7 @@ class RetargetIk:
         return errors
 
 
-def _root_step_budget(targets: RetargetTargets, root_body: str, settings: IkSettings) -> np.ndarray:
+def _root_step_budget(targets: RetargetTargets, root_body: str, settings: IkConfig) -> np.ndarray:
     """(T, 6) how far the floating base may move in each frame, per tangent axis (world linear,
     body angular): a multiple of its own target's fastest motion nearby plus a minimum, so the root
     can catch up in a fast transition but cannot run off far faster than the human it follows."""

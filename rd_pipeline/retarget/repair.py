@@ -7,8 +7,8 @@ from dataclasses import dataclass
 import mink
 import numpy as np
 
+from rd_pipeline.retarget.config import LagRepair
 from rd_pipeline.retarget.ik import RetargetIk
-from rd_pipeline.retarget.settings import LagRepair
 from rd_pipeline.retarget.smoothing import blend_configurations
 
 

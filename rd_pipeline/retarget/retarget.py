@@ -11,10 +11,10 @@ from scipy.ndimage import gaussian_filter1d
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
+from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.retarget.ik import RetargetIk
 from rd_pipeline.retarget.quality import FootMeshes, colliding_frames
 from rd_pipeline.retarget.repair import repair_lag
-from rd_pipeline.retarget.settings import RetargetParams
 from rd_pipeline.retarget.smoothing import blend_configurations, smooth_cover
 from rd_pipeline.retarget.targets import RetargetTargets, build_targets
 from rd_pipeline.robots import Robot
@@ -38,7 +38,7 @@ class RetargetResult:
 def retarget(
     human: HumanMotion,
     robot: Robot,
-    params: RetargetParams,
+    params: RetargetConfig,
     track: Callable[[Iterable[int], int], Iterable[int]] = lambda frames, total: frames,
 ) -> RetargetResult:
     """Retarget `human` onto `robot` with `params`; `track` wraps the frame loops (progress bars).

@@ -17,11 +17,11 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.contact import ContactThresholds, label_contacts
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.body_contact import hold_in_contact, label_body_contacts
+from rd_pipeline.retarget.config import BodyContactConfig, TargetShaping
 from rd_pipeline.retarget.feet import leg_yaw_range, plant_foot
 from rd_pipeline.retarget.frames import frame_from_axes, yaw_and_pitch
 from rd_pipeline.retarget.lafan_joints import FEET, HIPS_LR, LOWER_SPINE, PELVIS, SHOULDERS_LR, TOES, TORSO
 from rd_pipeline.retarget.legs import keep_feet_apart, keep_legs_reachable, match_stance_width
-from rd_pipeline.retarget.settings import BodyContactSettings, TargetShaping
 from rd_pipeline.robots import Robot
 
 TARGETS_FILE = "targets.npz"
@@ -117,7 +117,7 @@ def build_targets(
     foot_vertices: tuple[np.ndarray, np.ndarray],
     contact: ContactThresholds,
     shape: TargetShaping = TargetShaping(),
-    body_contact: BodyContactSettings = BodyContactSettings(),
+    body_contact: BodyContactConfig = BodyContactConfig(),
 ) -> RetargetTargets:
     config = robot.config
     sole_height = np.array([-vertices[:, 2].min() for vertices in foot_vertices])

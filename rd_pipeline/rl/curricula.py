@@ -5,11 +5,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from rd_pipeline.rl.terminations import TerminationsCfg
+from rd_pipeline.rl.terminations import TerminationsConfig
 
 
 @dataclass(frozen=True)
-class CurriculaCfg:
+class CurriculaConfig:
     """How the termination distance, the penalty scale and the tracking sigmas adapt."""
 
     degree: float = 1e-5
@@ -32,12 +32,12 @@ class CurriculumState:
     """Multiplier of the regularization terms."""
 
 
-def initial_state(cfg: CurriculaCfg, terminations: TerminationsCfg) -> CurriculumState:
+def initial_state(cfg: CurriculaConfig, terminations: TerminationsConfig) -> CurriculumState:
     return CurriculumState(motion_far_m=terminations.motion_far_init_m, penalty_scale=cfg.penalty_scale[0])
 
 
 def update(
-    state: CurriculumState, mean_length: float, count: int, cfg: CurriculaCfg, terminations: TerminationsCfg
+    state: CurriculumState, mean_length: float, count: int, cfg: CurriculaConfig, terminations: TerminationsConfig
 ) -> None:
     """Ease both curricula when `count` episodes just ended shorter than `down_up[0]` on average,
     tighten them when longer than `down_up[1]`."""

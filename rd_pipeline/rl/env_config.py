@@ -8,10 +8,10 @@ from typing import Literal
 
 from rd_pipeline.params import require_positive
 from rd_pipeline.rl.actions import ActionConfig
-from rd_pipeline.rl.curricula import CurriculaCfg
-from rd_pipeline.rl.observations import ObservationsCfg
-from rd_pipeline.rl.rewards import RewardsCfg
-from rd_pipeline.rl.terminations import TerminationsCfg
+from rd_pipeline.rl.curricula import CurriculaConfig
+from rd_pipeline.rl.observations import ObservationsConfig
+from rd_pipeline.rl.rewards import RewardsConfig
+from rd_pipeline.rl.terminations import TerminationsConfig
 
 CollisionModel = Literal["primitive", "mesh"]
 """`primitive`: boxes fitted to the collision meshes (training); `mesh`: the robot's own meshes (validation)."""
@@ -74,13 +74,13 @@ class EnvConfig:
     """A body touches something when its contact force exceeds this (N)."""
     actions: ActionConfig = ActionConfig()
     """Residual action mapping."""
-    observations: ObservationsCfg = ObservationsCfg()
+    observations: ObservationsConfig = ObservationsConfig()
     """Actor observation scales."""
-    rewards: RewardsCfg = RewardsCfg()
+    rewards: RewardsConfig = RewardsConfig()
     """The reward table."""
-    terminations: TerminationsCfg = TerminationsCfg()
+    terminations: TerminationsConfig = TerminationsConfig()
     """Failure tests."""
-    curricula: CurriculaCfg = CurriculaCfg()
+    curricula: CurriculaConfig = CurriculaConfig()
     """Termination, penalty and sigma curricula."""
     rsi_joint_pos: float = 0.1
     """RSI noise: joint positions (rad)."""

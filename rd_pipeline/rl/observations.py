@@ -29,7 +29,7 @@ class ObservationTerm:
 
 
 @dataclass(frozen=True)
-class ObservationsCfg:
+class ObservationsConfig:
     """Scales of the actor's observation terms (the raw quantity is multiplied by its scale)."""
 
     joint_pos: float = 1.0
@@ -101,7 +101,7 @@ ACTOR_TERMS: dict[str, Callable[[ActorInputs], torch.Tensor]] = {
 """Term name -> function, in the order of an actor frame."""
 
 
-def actor_terms(num_joints: int, num_actions: int, cfg: ObservationsCfg) -> tuple[ObservationTerm, ...]:
+def actor_terms(num_joints: int, num_actions: int, cfg: ObservationsConfig) -> tuple[ObservationTerm, ...]:
     """One actor frame's layout (oldest history frame first in the stacked vector)."""
     sizes = {"projected_gravity": 3, "base_ang_vel": 3, "last_action": num_actions}
     return tuple(ObservationTerm(name, sizes.get(name, num_joints), getattr(cfg, name)) for name in ACTOR_TERMS)

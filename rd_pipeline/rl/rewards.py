@@ -1,6 +1,6 @@
 """Reward terms of the paper's reward table: pure torch functions of a batched tracking state
 (`reward_terms.py`, each registered with the critic head it feeds), each configured by a frozen
-dataclass (weight, sigma, thresholds) that is a field of `RewardsCfg` named after its function. A
+dataclass (weight, sigma, thresholds) that is a field of `RewardsConfig` named after its function. A
 new term is one registered function plus its field.
 
 Tracking terms are Gaussian kernels w * exp(-e / sigma^2) of a mean squared error e; regularization
@@ -31,7 +31,7 @@ torch = lazy_import("torch")
 
 
 @dataclass(frozen=True)
-class RewardsCfg:
+class RewardsConfig:
     """The paper's reward table: one field per term, named after its function. Tracking terms
     are Gaussian kernels; regularization terms are scaled by the penalty curriculum."""
 
@@ -96,7 +96,7 @@ class RewardsCfg:
 class RewardManager:
     """Evaluates the configured terms and sums them per group (one column per critic head)."""
 
-    def __init__(self, cfg: RewardsCfg, context: TermContext) -> None:
+    def __init__(self, cfg: RewardsConfig, context: TermContext) -> None:
         self.context = context
         self.terms = [(f.name, getattr(cfg, f.name)) for f in dataclasses.fields(cfg)]
         unknown = [name for name, _ in self.terms if name not in REWARD_TERMS]

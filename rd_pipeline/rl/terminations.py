@@ -3,7 +3,7 @@
 `motion_far` and `bad_orientation` are pure torch functions of robot and reference state, shared by
 the training environment and the validation deploy loop so both judge failure the same way. The
 training environment ends an episode when any registered term fires: a new termination is one
-`@termination_term` function here, reading its thresholds from `TerminationsCfg`.
+`@termination_term` function here, reading its thresholds from `TerminationsConfig`.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ torch = lazy_import("torch")
 
 
 @dataclass(frozen=True)
-class TerminationsCfg:
+class TerminationsConfig:
     """Failure tests (paper, Table "Control, Initialization, and Termination Parameters")."""
 
     orientation_limit_rad: float = 0.75
@@ -49,7 +49,7 @@ def bad_orientation(root_quat: torch.Tensor, ref_root_quat: torch.Tensor, limit_
 class TerminationContext:
     """What the termination terms read besides the tracking state."""
 
-    config: TerminationsCfg
+    config: TerminationsConfig
     """The thresholds."""
     root: int
     """Index of the root among the tracked bodies."""

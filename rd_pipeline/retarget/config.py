@@ -48,7 +48,7 @@ class TargetShaping:
 
 
 @dataclass(frozen=True)
-class BodyContactSettings:
+class BodyContactConfig:
     """When a human knee, elbow, hand, pelvis or torso rests on the floor (LAFAN1's floor is z = 0)."""
 
     limb: ContactThresholds = ContactThresholds(
@@ -112,7 +112,7 @@ class IkWeights:
 
 
 @dataclass(frozen=True)
-class IkSettings:
+class IkConfig:
     """How the per-frame solve runs."""
 
     iterations: int = 2
@@ -196,7 +196,7 @@ class LagRepair:
 
 
 @dataclass(frozen=True)
-class RetargetParams:
+class RetargetConfig:
     """Output rate and the settings of each retargeting step (`--set retarget.weights.feet_position=50`)."""
 
     fps: float = 50.0
@@ -205,11 +205,11 @@ class RetargetParams:
     """When a human foot counts as planted."""
     shape: TargetShaping = TargetShaping()
     """How the human motion becomes robot targets."""
-    body_contact: BodyContactSettings = BodyContactSettings()
+    body_contact: BodyContactConfig = BodyContactConfig()
     """When knees, elbows, hands, pelvis and torso rest on the floor."""
     weights: IkWeights = IkWeights()
     """IK task costs."""
-    ik: IkSettings = IkSettings()
+    ik: IkConfig = IkConfig()
     """IK iterations, limits and the sequence-level smoothing."""
     repair: LagRepair = LagRepair()
     """When stretches that fell far behind their targets are solved again."""
