@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from rd_pipeline import robot_configs
+from rd_pipeline import robot_configs  # type: ignore[attr-defined]  # mapped from robots/ by setuptools
 from rd_pipeline.errors import PipelineError
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent

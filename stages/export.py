@@ -49,7 +49,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     scripted.save(str(ctx.out_dir / POLICY_FILE))
     reference_stage = next(s for s in REFERENCE_STAGES if s in manifest["upstream"])
     spec = build_policy_spec(
-        load_robot(ctx.robot),
+        load_robot(ctx.robot_name),
         params["env"],
         metrics["num_actions"],
         reference_stage,

@@ -54,7 +54,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.robots import load_robot
 
     p = ctx.params
-    robot = load_robot(ctx.robot)
+    robot = load_robot(ctx.robot_name)
     result = import_retargeted_csv(ctx.inputs["csv"], robot, p.source_fps, p.fps, p.interpolation, p.contact)
     if result.dropped_joints:
         ctx.console.print(f"  dataset joints not in the {ctx.robot} model, dropped: {', '.join(result.dropped_joints)}")
@@ -63,7 +63,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     # The same ruler as the retarget stage, so the dataset and our retargeting share one table
     # (no human here: keypoint and pelvis-height rulers need the scaled human, `bench/retarget.py`).
     series = quality_series(robot, reference)
-    np.savez(ctx.out_dir / QUALITY_SERIES_FILE, **series)
+    np.savez(ctx.out_dir / QUALITY_SERIES_FILE, **series)  # type: ignore[arg-type]  # numpy's stub reads ** as allow_pickle
     quality = summarize_quality(robot, reference, series)
     (ctx.out_dir / QUALITY_FILE).write_text(json.dumps(quality, indent=2) + "\n")
     return {

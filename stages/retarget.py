@@ -27,7 +27,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.robots import load_robot
 
     p: RetargetConfig = ctx.params
-    robot = load_robot(ctx.robot)
+    robot = load_robot(ctx.robot_name)
     human = HumanMotion.load(ctx.upstream["human_motion"].path / HUMAN_MOTION_FILE)
     began = time.perf_counter()
     result = retarget(
@@ -42,7 +42,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     targets.save(ctx.out_dir / TARGETS_FILE)
     feet = targets.foot_orientations(robot.config.foot_bodies)
     series = quality_series(robot, reference, targets.positions, targets.bodies, targets.human_pelvis, feet)
-    np.savez(ctx.out_dir / QUALITY_SERIES_FILE, **series)
+    np.savez(ctx.out_dir / QUALITY_SERIES_FILE, **series)  # type: ignore[arg-type]  # numpy's stub reads ** as allow_pickle
     quality = summarize_quality(robot, reference, series, frames_per_s=reference.n_frames / seconds)
     (ctx.out_dir / QUALITY_FILE).write_text(json.dumps(quality, indent=2) + "\n")
     return {

@@ -33,7 +33,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.sampling.segments import SEGMENTS_FILE, segment_statistics, std_ranking
 
     p: StatsConfig = ctx.params
-    robot = load_robot(ctx.robot)
+    robot = load_robot(ctx.robot_name)
     config = robot.config
     reference = ReferenceMotion.load(ctx.upstream["reference"].path / REFERENCE_FILE)
     mask = tuple(config.policy_joints[i] for i in config.residual_indices)

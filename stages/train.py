@@ -28,7 +28,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.sampling.prior import PRIOR_FILE
 
     config: TrainConfig = ctx.params
-    robot = load_robot(ctx.robot)
+    robot = load_robot(ctx.robot_name)
     reference = ReferenceMotion.load(ctx.upstream["reference"].path / REFERENCE_FILE)
     with open_npz(ctx.upstream["sampling_prior"].path / PRIOR_FILE) as prior:
         segments = Segments(prior["starts"], prior["lengths"], prior["weights"])
@@ -58,6 +58,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     )
     # The last iteration is always a scored checkpoint, so there is a best one.
     best = best_scored(rows)
+    assert best is not None
     return {
         **training_metrics(rows, runner, best),
         "continued_from": continued_from(ctx.out_dir),

@@ -26,7 +26,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     end = spec.get("reference.end_frame")
     motion = ReferenceMotion.load(made.path / REFERENCE_FILE).frames(start, end)
     clip = ReferenceClip(made.stage, made.key, motion, start, end)
-    robot = load_robot(ctx.robot)
+    robot = load_robot(ctx.robot_name)
     batches = len(CONTROLLERS) * (1 + len(config.randomized_seeds))
     with ctx.progress(batches, "sim2sim rollouts") as advance:
         validation = validate_policy(robot, ctx.motion, exported.path, exported.key, clip, config, advance)
@@ -35,6 +35,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     write_markdown(report, ctx.out_dir)
     plot_report(report, ctx.out_dir)
     tracked = validation.tracked
+    assert tracked.body_pos is not None and tracked.body_quat is not None  # the first rollout keeps its poses
     save_tracked(ctx.out_dir / TRACKED_FILE, tracked.body_pos, tracked.body_quat, start, motion.fps)
     recording = f"{ctx.robot}_{ctx.motion}_sim2sim"
     record_tracking(

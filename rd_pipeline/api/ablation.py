@@ -50,7 +50,7 @@ def ablation_table(study: str, arms: tuple[str, ...], results: list[TrialResult]
                 per_seed.setdefault(r.trial.seed, []).append(json.loads(Path(r.report).read_text()))
         row = {}
         for metric in METRICS[study]:
-            seeds = []
+            seeds: list[float | None] = []
             for reports in per_seed.values():
                 values = [v for v in (_value(rep, metric) for rep in reports) if v is not None]
                 seeds.append(sum(values) / len(values) if values else None)

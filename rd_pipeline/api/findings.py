@@ -113,9 +113,11 @@ def judge(claim: Claim, arms: dict[str, list[dict]]) -> dict:
     if len(better) < 2 or len(than) < 2:
         return verdict | {"difference": None, "low": None, "high": None, "verdict": "not judged (under 2 seeds)"}
     interval = difference_interval(better, than) if claim.higher_is_better else difference_interval(than, better)
-    if interval["low"] > 0:
+    low = interval["low"]
+    high = interval["high"]
+    if low is not None and low > 0:
         word = "supported"
-    elif interval["high"] < 0:
+    elif high is not None and high < 0:
         word = "contradicted"
     else:
         word = "undecided"

@@ -182,11 +182,12 @@ def _run_on_ray(
         ignore_reinit_error=True,
         include_dashboard=False,
         log_to_driver=False,
-        **({} if address else {"num_cpus": os.cpu_count()}),
+        num_cpus=None if address else os.cpu_count(),
     )
     remote = ray.remote(num_cpus=1)(run_trial)
     try:
-        return ray.get([remote.remote(t, profile, env, resume) for t in trials])
+        # ray's stubs type remote functions of up to a few arguments; this one takes four.
+        return ray.get([remote.remote(t, profile, env, resume) for t in trials])  # type: ignore[call-arg]
     finally:
         ray.shutdown()
 

@@ -52,6 +52,13 @@ class StageContext:
     """With `resume`: finished artifacts of this stage, version, inputs and upstream whose params
     differ from `params` only in the stage's `extends` fields; the stage decides which it can grow."""
 
+    @property
+    def robot_name(self) -> str:
+        """The robot of a per-robot stage (the runner plans none without one)."""
+        if self.robot is None:
+            raise PipelineError(f"{self.motion}: this stage needs --robot")
+        return self.robot
+
     def track(self, items: Iterable[T], total: int, description: str) -> Iterator[T]:
         """Iterate with a progress bar (ETA included) for long loops."""
         with self.progress(total, description) as advance:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import os
 import sys
+from collections.abc import Callable
+from typing import Any
 
 import tyro
 from rich.console import Console
@@ -59,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _dispatch(command: object, console: Console) -> int:
-    handlers = {
+    handlers: dict[type, Callable[[Any, Console], int]] = {
         Run: commands.run,
         Plan: commands.plan,
         StageCommand: commands.stage,

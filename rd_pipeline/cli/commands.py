@@ -6,6 +6,7 @@ import dataclasses
 import json
 import subprocess
 import sys
+from typing import Any
 
 from rich.console import Console
 from rich.markup import escape
@@ -55,7 +56,7 @@ def run(cmd: Run, console: Console) -> int:
 
 def plan(cmd: Plan, console: Console) -> int:
     planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, cmd.set, cmd.seed, cmd.source)
-    rows = [
+    rows: list[dict[str, Any]] = [
         {
             "stage": entry.name,
             "key": entry.key,

@@ -3,6 +3,8 @@ and the reduction of several seeds to a mean with a 95% Student-t interval."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from scipy import stats
 
@@ -66,7 +68,7 @@ def bootstrap_ci(values: np.ndarray, rng: np.random.Generator, resamples: int = 
     return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
 
 
-def t_interval(values: list[float]) -> dict[str, float | int | None]:
+def t_interval(values: Sequence[float | None]) -> dict[str, float | int | None]:
     """Mean and 95% Student-t half-width over seeds (half-width None for a single seed)."""
     array = np.asarray([v for v in values if v is not None], dtype=float)
     if len(array) == 0:

@@ -12,14 +12,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from fnmatch import fnmatch
-from typing import Literal, get_args
+from typing import TYPE_CHECKING, Literal, get_args
 
 import numpy as np
 
 from rd_pipeline.lazy import lazy_import
 from rd_pipeline.robots.config import RobotConfig
 
-torch = lazy_import("torch")
+if TYPE_CHECKING:
+    import torch
+else:
+    torch = lazy_import("torch")
 
 ResidualPreset = Literal[
     "absolute",

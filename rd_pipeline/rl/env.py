@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 
+import mujoco
 import numpy as np
 import torch
 from tensordict import TensorDict
@@ -62,38 +63,63 @@ class TrackingEnv:
                 f"train.env: the control rate 1 / (physics_dt * decimation) = {self.control_hz:g} Hz "
                 f"differs from the reference's {reference.fps:g} fps"
             )
-        rc = robot.config
-
-        sensors = config.backend == "rollout"
-        base = simulation_model(robot, config.physics_dt, config.collision, body_sensors=sensors)
-        models, dr_params = events.randomized_models(
-            base, self.num_envs, config.randomization, base.body(rc.root_body).id, self.rng
+        base = self._build_physics()
+        self._index_model(base)
+        tracked = list(robot.config.tracking_bodies)
+        self.command = MotionCommand(
+            reference,
+            tracked,
+            robot.config.root_body,
+            sampler,
+            segment_starts,
+            segment_lengths,
+            self.num_envs,
+            self.tensor,
         )
+        self._build_terms(tracked)
+        self._build_buffers()
+        self.reset(torch.arange(self.num_envs))  # every history starts full of its first frame
+
+    def tensor(self, values: object, dtype: torch.dtype = DTYPE) -> torch.Tensor:
+        """`values` as a tensor on the simulation's device."""
+        return torch.tensor(np.asarray(values), dtype=dtype, device=self.device)
+
+    def _build_physics(self) -> mujoco.MjModel:
+        """The backend over one randomized model per environment; returns the nominal model."""
+        config = self.config
+        sensors = config.backend == "rollout"
+        base = simulation_model(self.robot, config.physics_dt, config.collision, body_sensors=sensors)
+        root = base.body(self.robot.config.root_body).id
+        models, dr_params = events.randomized_models(base, self.num_envs, config.randomization, root, self.rng)
         self.backend = make_backend(config.backend, models, config.threads, config.device)
         self.device = self.backend.device
-        device = self.device
-        tensor = lambda x, dtype=DTYPE: torch.tensor(np.asarray(x), dtype=dtype, device=device)
-        self.dr_params = tensor(dr_params)
+        self.dr_params = self.tensor(dr_params)
         self.rfi_factor = dr_params[:, 8]
-        self.delay = tensor(dr_params[:, 7], torch.long)
-        self.policy_idx = tensor(rc.policy_indices, torch.long)
-        self.qpos_idx = tensor([base.jnt_qposadr[base.joint(j).id] for j in rc.joint_names], torch.long)
-        self.dof_idx = tensor([base.jnt_dofadr[base.joint(j).id] for j in rc.joint_names], torch.long)
-        self.joint_range = tensor(robot.joint_range, torch.float64)
+        self.delay = self.tensor(dr_params[:, 7], torch.long)
+        return base
 
+    def _index_model(self, base: mujoco.MjModel) -> None:
+        """Where the configured joints and bodies sit in the model's state."""
+        rc = self.robot.config
+        index = lambda values: self.tensor(values, torch.long)
+        self.policy_idx = index(rc.policy_indices)
+        self.qpos_idx = index([base.jnt_qposadr[base.joint(j).id] for j in rc.joint_names])
+        self.dof_idx = index([base.jnt_dofadr[base.joint(j).id] for j in rc.joint_names])
+        self.joint_range = self.tensor(self.robot.joint_range, torch.float64)
         tracked = list(rc.tracking_bodies)
-        self.sim_bodies = tensor([base.body(b).id for b in tracked], torch.long)
-        self.feet_sim = tensor([base.body(b).id for b in rc.foot_bodies], torch.long)
+        self.sim_bodies = index([base.body(b).id for b in tracked])
+        self.feet_sim = index([base.body(b).id for b in rc.foot_bodies])
         feet = set(self.feet_sim.tolist())
-        self.undesired = tensor([b for b in range(1, base.nbody) if b not in feet], torch.long)
-        self.term_idx = tensor([tracked.index(b) for b in rc.termination_bodies], torch.long)
-        self.command = MotionCommand(
-            reference, tracked, rc.root_body, sampler, segment_starts, segment_lengths, self.num_envs, tensor
-        )
+        self.undesired = index([b for b in range(1, base.nbody) if b not in feet])
+        self.term_idx = index([tracked.index(b) for b in rc.termination_bodies])
 
-        lower = tensor(robot.joint_range[:, 0])
-        upper = tensor(robot.joint_range[:, 1])
-        self.default_pos = tensor(rc.default_pos)
+    def _build_terms(self, tracked: list[str]) -> None:
+        """Actions, actor observation layout, reward terms and the adaptive sigmas."""
+        rc = self.robot.config
+        config = self.config
+        lower = self.tensor(self.robot.joint_range[:, 0])
+        upper = self.tensor(self.robot.joint_range[:, 1])
+        self.default_pos = self.tensor(rc.default_pos)
         p = self.policy_idx
         semantics = joint_semantics(rc, config.actions.mode)
         self.actions = ResidualActions(config.actions, semantics, self.default_pos[p], lower[p], upper[p])
@@ -105,25 +131,31 @@ class TrackingEnv:
             keypoints=tuple(i for i, b in enumerate(tracked) if b not in rc.foot_bodies)[-3:],
             joint_lower=lower[p],
             joint_upper=upper[p],
-            velocity_limit=tensor(rc.velocity_limit)[p],
-            effort_limit=tensor(rc.effort_limit),
+            velocity_limit=self.tensor(rc.velocity_limit)[p],
+            effort_limit=self.tensor(rc.effort_limit),
         )
         self.rewards = RewardManager(config.rewards, self.term_context)
-        self.sigma = AdaptiveSigma(config.curricula.adaptive_sigma_alpha, self.rewards.tracking_sigmas(), device)
+        sigmas = self.rewards.tracking_sigmas()
+        self.sigma = AdaptiveSigma(config.curricula.adaptive_sigma_alpha, sigmas, self.device)
 
+    def _build_buffers(self) -> None:
+        """Per-environment state between steps. Episode bookkeeping lives on the host beside the
+        random generator and the sampler: resets, pushes and curricula then read one transfer per
+        step, the done flags."""
         n = self.num_envs
-        # Episode bookkeeping lives on the host beside the random generator and the sampler: resets,
-        # pushes and curricula then read one transfer per step, the done flags.
+        config = self.config
+        device = self.device
         self.episode_length_buf = torch.zeros(n, dtype=torch.long)
         self.action_history = torch.zeros(n, 3, self.num_actions, dtype=DTYPE, device=device)
         queue = config.randomization.max_delay_steps + 1
-        self.target_queue = torch.zeros(n, queue, len(rc.joint_names), dtype=DTYPE, device=device)
+        joints = len(self.robot.config.joint_names)
+        self.target_queue = torch.zeros(n, queue, joints, dtype=DTYPE, device=device)
         self.feet_air_time = torch.zeros(n, 2, dtype=DTYPE, device=device)
-        self.next_push = torch.as_tensor(events.push_intervals(config.randomization, n, self.step_dt, self.rng))
+        intervals = events.push_intervals(config.randomization, n, self.step_dt, self.rng)
+        self.next_push = torch.as_tensor(intervals)
         self.curriculum = curricula.initial_state(config.curricula, config.terminations)
-        self.obs_frames: torch.Tensor | None = None
-        self.reset(torch.arange(n))
-        self.get_observations()  # fills the observation history
+        frame_size = sum(term.size for term in self.actor_terms)
+        self.obs_frames = torch.zeros(n, config.history, frame_size, dtype=DTYPE, device=device)
 
     # -- reset -------------------------------------------------------------------------------
     def reset(self, env_ids: torch.Tensor, frames: torch.Tensor | None = None) -> None:
@@ -148,8 +180,7 @@ class TrackingEnv:
         self.action_history[device_ids] = 0.0
         self.feet_air_time[device_ids] = 0.0
         self.target_queue[device_ids] = qpos[:, self.qpos_idx].to(DTYPE)[:, None]
-        if self.obs_frames is not None:
-            self.obs_frames[device_ids] = self._actor_frame()[device_ids, None]
+        self.obs_frames[device_ids] = self._actor_frame()[device_ids, None]
 
     @property
     def sampler(self) -> SegmentSampler:
@@ -183,9 +214,6 @@ class TrackingEnv:
         return actor_frame(self.actor_terms, inputs)
 
     def get_observations(self) -> TensorDict:
-        if self.obs_frames is None:
-            frame = self._actor_frame()
-            self.obs_frames = frame[:, None].repeat(1, self.config.history, 1)
         frame = self.command.frame
         inputs = CriticInputs(
             actor_frame=self.obs_frames[:, -1],

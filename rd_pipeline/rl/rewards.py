@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from rd_pipeline.lazy import lazy_import
 from rd_pipeline.rl.reward_terms import (
@@ -27,7 +28,10 @@ from rd_pipeline.rl.reward_terms import (
     TrackingTerm,
 )
 
-torch = lazy_import("torch")
+if TYPE_CHECKING:
+    import torch
+else:
+    torch = lazy_import("torch")
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from tensordict import TensorDict
 
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.ppo import MultiHeadPPO
@@ -70,38 +71,11 @@ def train(
     obs = env.get_observations()
     _drop_rows_after(out_dir / LOG_FILE, start_iteration)
     log = (out_dir / LOG_FILE).open("a")
-    cores = torch.get_num_threads()
     for iteration in range(start_iteration, iterations):
         began = time.perf_counter()
-        lengths = []
-        rewards = []
-        # While collecting, the physics threads want the cores: torch's idle workers would spin on
-        # them between the policy's small matrix products. The update gets every core.
-        torch.set_num_threads(1)
-        with torch.inference_mode():
-            for _ in range(ppo.storage.num_transitions_per_env):
-                actions = ppo.act(obs)
-                obs, reward, dones, extras = env.step(actions)
-                ppo.process_env_step(obs, reward, dones, extras)
-                lengths += extras["episode_length"].tolist()
-                rewards.append(reward.mean(0))
-            ppo.compute_returns(obs)
-        torch.set_num_threads(cores)
+        obs, lengths, rewards = _collect(env, ppo, obs)
         losses = ppo.update()
-        seconds = time.perf_counter() - began
-        per_group = torch.stack(rewards).mean(0)
-        row = {
-            "iteration": iteration + 1,
-            "seconds": round(seconds, 3),
-            "samples_per_s": round(env.num_envs * ppo.storage.num_transitions_per_env / seconds, 1),
-            "episode_length_s": round(float(np.mean(lengths)) / env.control_hz, 4) if lengths else None,
-            "reward": round(float(per_group.sum()), 4),
-            **{f"reward_{g}": round(float(v), 4) for g, v in zip(GROUPS, per_group)},
-            **{f"loss_{k}": round(float(v), 4) for k, v in losses.items()},
-            "learning_rate": ppo.learning_rate,
-            "motion_far_m": round(env.curriculum.motion_far_m, 4),
-            "penalty_scale": round(env.curriculum.penalty_scale, 4),
-        }
+        row = _log_row(env, ppo, iteration + 1, time.perf_counter() - began, lengths, rewards, losses)
         done = iteration + 1
         checkpoint = done % checkpoint_every == 0 or done == iterations
         if checkpoint and score is not None:
@@ -114,6 +88,53 @@ def train(
             save_checkpoint(checkpoint_path(out_dir, done), done, ppo, env)
     log.close()
     return history
+
+
+def _collect(env: TrackingEnv, ppo: MultiHeadPPO, obs: TensorDict) -> tuple[TensorDict, list[float], torch.Tensor]:
+    """One rollout of every environment into PPO's storage, and the returns computed: the last
+    observations, the lengths of the episodes that ended, the (steps, G) mean reward per group."""
+    lengths: list[float] = []
+    rewards = []
+    cores = torch.get_num_threads()
+    # While collecting, the physics threads want the cores: torch's idle workers would spin on
+    # them between the policy's small matrix products. The update gets every core.
+    torch.set_num_threads(1)
+    with torch.inference_mode():
+        for _ in range(ppo.storage.num_transitions_per_env):
+            actions = ppo.act(obs)
+            obs, reward, dones, extras = env.step(actions)
+            ppo.process_env_step(obs, reward, dones, extras)
+            lengths += extras["episode_length"].tolist()
+            rewards.append(reward.mean(0))
+        ppo.compute_returns(obs)
+    torch.set_num_threads(cores)
+    return obs, lengths, torch.stack(rewards)
+
+
+def _log_row(
+    env: TrackingEnv,
+    ppo: MultiHeadPPO,
+    iteration: int,
+    seconds: float,
+    lengths: list[float],
+    rewards: torch.Tensor,
+    losses: dict[str, float],
+) -> dict:
+    """One iteration's line of the training log."""
+    per_group = rewards.mean(0)
+    samples = env.num_envs * ppo.storage.num_transitions_per_env
+    return {
+        "iteration": iteration,
+        "seconds": round(seconds, 3),
+        "samples_per_s": round(samples / seconds, 1),
+        "episode_length_s": round(float(np.mean(lengths)) / env.control_hz, 4) if lengths else None,
+        "reward": round(float(per_group.sum()), 4),
+        **{f"reward_{g}": round(float(v), 4) for g, v in zip(GROUPS, per_group)},
+        **{f"loss_{k}": round(float(v), 4) for k, v in losses.items()},
+        "learning_rate": ppo.learning_rate,
+        "motion_far_m": round(env.curriculum.motion_far_m, 4),
+        "penalty_scale": round(env.curriculum.penalty_scale, 4),
+    }
 
 
 def _drop_rows_after(path: Path, iteration: int) -> None:

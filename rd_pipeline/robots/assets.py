@@ -33,9 +33,11 @@ def asset_path(relative: str) -> Path:
     return path
 
 
-def model_files(name: str) -> dict[str, Path]:
+def model_files(name: str | None) -> dict[str, Path]:
     """The files that define a robot (its config and MJCF), as hashed inputs of the stages that use it."""
     from rd_pipeline.robots.config import load_robot_config
 
+    if name is None:
+        raise PipelineError("this stage needs --robot")
     config = load_robot_config(name)
     return {"robot_config": config.source, "mjcf": asset_path(config.mjcf)}

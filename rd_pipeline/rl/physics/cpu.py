@@ -31,13 +31,13 @@ class MujocoCpuBackend:
         self.buffers, self.state = state_buffers(self.num_envs, models[0])
 
     def set_state(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
-        qpos = qpos.numpy()
-        qvel = qvel.numpy()
+        qpos_host = qpos.numpy()
+        qvel_host = qvel.numpy()
         for k, i in enumerate(env_ids.tolist()):
             data = self.datas[i]
             mujoco.mj_resetData(self.models[i], data)
-            data.qpos[:] = qpos[k]
-            data.qvel[:] = qvel[k]
+            data.qpos[:] = qpos_host[k]
+            data.qvel[:] = qvel_host[k]
             mujoco.mj_forward(self.models[i], data)
             self._read(i)
 
@@ -51,7 +51,7 @@ class MujocoCpuBackend:
         """Hold `ctrl` (N, nu) PD targets for `substeps` physics steps, with extra generalized forces
         `joint_force` (N, nv) (random force injection) held over the same steps; environments where
         `active` (N,) is False are left as they are (finished rollouts)."""
-        ctrl = ctrl.numpy().astype(np.float64)
+        targets = ctrl.numpy().astype(np.float64)
         force = None if joint_force is None else joint_force.numpy()
         stepped = None if active is None else active.numpy()
 
@@ -61,7 +61,7 @@ class MujocoCpuBackend:
                     continue
                 model = self.models[i]
                 data = self.datas[i]
-                data.ctrl[:] = ctrl[i]
+                data.ctrl[:] = targets[i]
                 if force is not None:
                     data.qfrc_applied[:] = force[i]
                 mujoco.mj_step(model, data, nstep=substeps)

@@ -49,14 +49,14 @@ class MujocoRolloutBackend:
         self._sensor_trajectory = np.zeros((0,))
 
     def set_state(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
-        qpos = qpos.numpy()
-        qvel = qvel.numpy()
+        qpos_host = qpos.numpy()
+        qvel_host = qvel.numpy()
         data = self.scratch
         for k, i in enumerate(env_ids.tolist()):
             model = self.models[i]
             mujoco.mj_resetData(model, data)
-            data.qpos[:] = qpos[k]
-            data.qvel[:] = qvel[k]
+            data.qpos[:] = qpos_host[k]
+            data.qvel[:] = qvel_host[k]
             mujoco.mj_forward(model, data)
             mujoco.mj_getState(model, data, self.full[i], STATE)
             self.sensors[i] = data.sensordata

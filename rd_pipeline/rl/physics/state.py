@@ -15,19 +15,19 @@ import torch
 class PhysicsState:
     """What the environment reads after a control step (torch, per environment, on the backend's device)."""
 
-    qpos: np.ndarray
+    qpos: torch.Tensor
     """(N, nq)"""
-    qvel: np.ndarray
+    qvel: torch.Tensor
     """(N, nv)"""
-    body_pos: np.ndarray
+    body_pos: torch.Tensor
     """(N, nbody, 3) world positions."""
-    body_quat: np.ndarray
+    body_quat: torch.Tensor
     """(N, nbody, 4) world orientations, wxyz."""
-    body_vel: np.ndarray
+    body_vel: torch.Tensor
     """(N, nbody, 6) world-frame [angular, linear] velocities at the body origins."""
-    actuator_force: np.ndarray
+    actuator_force: torch.Tensor
     """(N, nu) applied (clipped) PD torques of the last physics step."""
-    contact_force: np.ndarray
+    contact_force: torch.Tensor
     """(N, nbody, 3) summed contact force on each body (world frame)."""
 
 

@@ -18,6 +18,21 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.rl.physics.state import PhysicsState, body_velocities_torch
 from rd_pipeline.rl.sim_model import RANDOMIZED_FIELDS
 
+VIEWED_FIELDS = (
+    "qpos",
+    "qvel",
+    "ctrl",
+    "qfrc_applied",
+    "qacc_warmstart",
+    "xpos",
+    "xquat",
+    "cvel",
+    "subtree_com",
+    "actuator_force",
+    "cfrc_ext",
+)
+"""Warp data fields the backend reads and writes through torch."""
+
 
 class MujocoWarpBackend:
     """N worlds of one MuJoCo Warp model and data."""
@@ -36,7 +51,7 @@ class MujocoWarpBackend:
             import warp as wp
         except ImportError:
             raise PipelineError("the warp backend needs the gpu extra: pip install 'rd-pipeline[gpu]'") from None
-        wp.config.quiet = True
+        wp.config.quiet = True  # type: ignore[attr-defined]  # set at runtime; not in the stubs
         if device.startswith("cuda") and not wp.is_cuda_available():
             raise PipelineError(f"train.env.device '{device}': Warp sees no CUDA device here")
         self.wp = wp
@@ -47,34 +62,14 @@ class MujocoWarpBackend:
         self.device = torch.device(self.warp_device)
         base = models[0]
         with wp.ScopedDevice(self.warp_device):
-            self.model = mjw.put_model(base)
-            for field in RANDOMIZED_FIELDS:
-                values = np.stack([getattr(m, field) for m in models])
-                if not np.array_equal(values, np.broadcast_to(values[:1], values.shape)):
-                    current = getattr(self.model, field)
-                    setattr(self.model, field, wp.array(values.astype(np.float32), dtype=current.dtype))
+            self.model = self._batched_model(models)
             self.data = mjw.make_data(
                 base, nworld=self.num_envs, nconmax=contacts_per_world, njmax=constraints_per_world
             )
         self.graph = None
         self.graph_substeps = 0
         self.root_ids = torch.as_tensor(base.body_rootid, device=self.device)
-        self.view = {
-            name: wp.to_torch(getattr(self.data, name))
-            for name in (
-                "qpos",
-                "qvel",
-                "ctrl",
-                "qfrc_applied",
-                "qacc_warmstart",
-                "xpos",
-                "xquat",
-                "cvel",
-                "subtree_com",
-                "actuator_force",
-                "cfrc_ext",
-            )
-        }
+        self.view = {name: wp.to_torch(getattr(self.data, name)) for name in VIEWED_FIELDS}
         """Torch tensors sharing memory with the Warp data (writes go straight to the simulation)."""
         v = self.view
         self.state = PhysicsState(
@@ -86,6 +81,16 @@ class MujocoWarpBackend:
             actuator_force=v["actuator_force"],
             contact_force=v["cfrc_ext"][..., 3:],
         )
+
+    def _batched_model(self, models: list[mujoco.MjModel]):
+        """One Warp model of all worlds: the randomized fields that differ become per-world arrays."""
+        batched = self.mjw.put_model(models[0])
+        for field in RANDOMIZED_FIELDS:
+            values = np.stack([getattr(m, field) for m in models])
+            if not np.array_equal(values, np.broadcast_to(values[:1], values.shape)):
+                current = getattr(batched, field)
+                setattr(batched, field, self.wp.array(values.astype(np.float32), dtype=current.dtype))
+        return batched
 
     def _refresh(self) -> PhysicsState:
         """Kinematics and external forces of the integrated state (the state tensors are views)."""
