@@ -23,7 +23,7 @@ from rich.console import Console
 
 from rd_pipeline import paths
 from rd_pipeline.artifacts.runner import Pipeline, PlannedStage, StageOutcome, execute, resolve_source, stage_status
-from rd_pipeline.artifacts.stage import Stage, build_params
+from rd_pipeline.artifacts.stage import Stage
 from rd_pipeline.artifacts.store import MANIFEST, ArtifactStore
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.params import layered_params
@@ -78,27 +78,27 @@ def plan(
         load_robot_config(robot)  # unknown robot: one clear line before anything else
     names = [stage.name for stage in REGISTRY]
     values = layered_params(profile, names, params_file, overrides)
-    for stage in REGISTRY:
-        build_params(stage, values.get(stage.name, {}))
     if seed is not None:
         for stage in REGISTRY:
             if "seed" in {field.name for field in dataclasses.fields(stage.params)}:
                 values.setdefault(stage.name, {}).setdefault("seed", seed)
     pipeline = Pipeline(REGISTRY, robot, motion, resolve_source(robot, motion, source), values)
-    _check_control_rate(pipeline)
+    _check_params(pipeline)
     return Plan(pipeline, ArtifactStore(store or paths.artifacts_dir()))
 
 
-def _check_control_rate(pipeline: Pipeline) -> None:
-    """The policy steps once per reference frame, so the training control rate must equal the
-    reference's fps; said before any stage runs."""
+def _check_params(pipeline: Pipeline) -> None:
+    """Build every stage's params, which checks each value, also for stages that will not run; then
+    the training control rate against the reference's fps (the policy steps once per reference
+    frame). Said before any stage runs."""
+    params = pipeline.params
     chain = {stage.provides: stage for stage in pipeline.chain()}
     if "reference" not in chain or "policy" not in chain:
         return
     maker = chain["reference"]
-    fps = build_params(maker, pipeline.param_values.get(maker.name, {})).fps
+    fps = params[maker.name].fps
     trainer = chain["policy"]
-    env = build_params(trainer, pipeline.param_values.get(trainer.name, {})).env
+    env = params[trainer.name].env
     control_hz = 1.0 / (env.physics_dt * env.decimation)
     if not math.isclose(control_hz, fps, rel_tol=1e-6):
         raise PipelineError(

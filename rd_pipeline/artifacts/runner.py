@@ -7,7 +7,7 @@ import subprocess
 import time
 from dataclasses import dataclass
 from datetime import UTC, datetime
-from functools import lru_cache, partial
+from functools import cached_property, lru_cache, partial
 from pathlib import Path
 from typing import Any
 
@@ -76,6 +76,11 @@ class Pipeline:
     param_values: dict[str, dict[str, Any]]
     """Stage name -> param overrides (profile, params file and `--set`, already layered)."""
 
+    @cached_property
+    def params(self) -> dict[str, Any]:
+        """Stage name -> its typed params, built once from `param_values` (every value checked)."""
+        return {stage.name: build_params(stage, self.param_values.get(stage.name, {})) for stage in self.registry}
+
     def chain(self) -> list[Stage]:
         """Stages of this source in dependency order (registry order breaks ties)."""
         candidates = [s for s in self.registry if s.source in (None, self.source)]
@@ -121,7 +126,7 @@ class Pipeline:
         for stage in stages:
             if stage.per_robot and not self.robot:
                 raise PipelineError(f"stage '{stage.name}' needs --robot")
-            params = build_params(stage, self.param_values.get(stage.name, {}))
+            params = self.params[stage.name]
             inputs = stage.inputs(self.robot if stage.per_robot else None, self.motion)
             for label, path in inputs.items():
                 paths.require_file(path, f"input '{label}' of stage {stage.name}")
