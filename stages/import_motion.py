@@ -7,6 +7,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from rich.markup import escape
+
 from rd_pipeline import paths
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
@@ -57,7 +59,9 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     robot = load_robot(ctx.robot_name)
     result = import_retargeted_csv(ctx.inputs["csv"], robot, p.source_fps, p.fps, p.interpolation, p.contact)
     if result.dropped_joints:
-        ctx.console.print(f"  dataset joints not in the {ctx.robot} model, dropped: {', '.join(result.dropped_joints)}")
+        ctx.console.print(
+            escape(f"  dataset joints not in the {ctx.robot} model, dropped: {', '.join(result.dropped_joints)}")
+        )
     reference = result.reference
     reference.save(ctx.out_dir / REFERENCE_FILE)
     # The same ruler as the retarget stage, so the dataset and our retargeting share one table

@@ -6,6 +6,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from rich.markup import escape
+
 from rd_pipeline import paths
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
@@ -34,7 +36,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     if short:
         raise PipelineError(short)
     for warning in clip.warnings:
-        ctx.console.print(f"[yellow]warning:[/] {warning}", highlight=False, soft_wrap=True)
+        ctx.console.print(f"[yellow]warning:[/] {escape(warning)}", highlight=False, soft_wrap=True)
     human = human_motion_from_bvh(clip, ctx.params.length_unit_m, LAFAN_TO_Z_UP)
     human.save(ctx.out_dir / HUMAN_MOTION_FILE)
     return {

@@ -59,7 +59,8 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     ctx.console.print(
         f"  residual mask std ranks: {list(ranking['mask_ranks'].values())} of {len(config.policy_joints)} policy joints, "
         f"{list(leg_ranking['mask_ranks'].values())} of {len(legs)} leg joints"
-        f" ({'agrees with' if leg_ranking['agrees'] else 'differs from'} the top {len(mask)} leg joints by std)"
+        f" ({'agrees with' if leg_ranking['agrees'] else 'differs from'} the top {len(mask)} leg joints by std)",
+        markup=False,
     )
     return {k: v for k, v in summary.items() if not k.startswith("std_ranking")} | {
         "mask_ranks_by_std": ranking["mask_ranks"],

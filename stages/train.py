@@ -5,6 +5,8 @@ from __future__ import annotations
 import shutil
 from typing import TYPE_CHECKING, Any
 
+from rich.markup import escape
+
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.artifacts.store import ArtifactRef
 from rd_pipeline.files import open_npz
@@ -32,13 +34,15 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     reference = ReferenceMotion.load(ctx.upstream["reference"].path / REFERENCE_FILE)
     with open_npz(ctx.upstream["sampling_prior"].path / PRIOR_FILE) as prior:
         segments = Segments(prior["starts"], prior["lengths"], prior["weights"])
-    warn = lambda message: ctx.console.print(f"[yellow]warning:[/] {message}", highlight=False)
+    warn = lambda message: ctx.console.print(f"[yellow]warning:[/] {escape(message)}", highlight=False)
     start, end = clip_frames(config.clip, reference.fps, reference.n_frames, warn)
     runner = TrainingRunner(robot, reference.frames(start, end), clip_segments(segments, start, end), config)
     # Checkpoints and the log live in the work folder, which survives an interruption.
     work = ctx.work_dir or ctx.out_dir
     shorter = _longest_shorter_run(ctx.shorter, config.iterations) if ctx.resume else None
-    first = runner.prepare(work, ctx.resume, shorter, lambda line: ctx.console.print(line, highlight=False))
+    first = runner.prepare(
+        work, ctx.resume, shorter, lambda line: ctx.console.print(line, markup=False, highlight=False)
+    )
     with ctx.progress(config.iterations - first, f"PPO {ctx.robot}") as advance:
         rows = runner.learn(
             work,

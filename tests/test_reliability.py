@@ -158,8 +158,26 @@ def test_a_clip_past_the_end_is_clamped_and_said() -> None:
     said = []
     assert clip_frames("125:1000", 50.0, 6575, said.append) == (6250, 6575)
     assert said == ["train.clip '125:1000' ends after the 131.50 s motion: training on 125:131.50"]
-    with pytest.raises(PipelineError, match=r"^train.clip '0:0.1' leaves less than 1 s of the 131.50 s motion$"):
-        clip_frames("0:0.1", 50.0, 6575, said.append)
+    with pytest.raises(PipelineError, match=r"^train.clip '131:140' leaves less than 1 s of the 131.50 s motion$"):
+        clip_frames("131:140", 50.0, 6575, said.append)
+
+
+@pytest.mark.parametrize(
+    ("clip", "message"),
+    [
+        ("[/x]", "must be START:END in seconds, got '[/x]'"),
+        ("[bold]x", "must be START:END in seconds, got '[bold]x'"),
+        ("5:2", "must end more than 1 s after it starts, got '5:2'"),
+        ("0:0.1", "must end more than 1 s after it starts, got '0:0.1'"),
+        ("-1:5", "must start at 0 s or later, got '-1:5'"),
+        ("1:2:3", "must be START:END in seconds, got '1:2:3'"),
+    ],
+)
+def test_a_malformed_clip_is_refused_literally_when_params_are_read(clip: str, message: str, artifacts: Path) -> None:
+    result = cli("run", "--until", "parse", "--set", f"train.clip={clip}")
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [f"error: parameter 'train.clip' {message}"]
+    assert not artifacts.exists()  # refused before any stage ran
 
 
 def test_a_cached_parse_loads_neither_torch_nor_mujoco(artifacts: Path) -> None:
@@ -196,3 +214,38 @@ def test_quickstart_without_data_says_in_one_line_how_to_get_it(tmp_path: Path) 
     assert last.startswith("quickstart: no motion data: run `.venv/bin/rd-pipeline fetch-lafan`")
     assert "RD_LAFAN_DIR" in last and "RD_RETARGETED_DIR" in last
     assert "Traceback" not in result.stderr
+
+
+def test_user_text_is_printed_literally(tmp_path: Path) -> None:
+    """Paths, names and file:line positions are neither rich markup nor emoji codes."""
+    store = tmp_path / "a[bold]b"
+    header = cli("run", "--until", "parse", env={"RD_ARTIFACTS": str(store)})
+    assert header.returncode == 0, header.stderr
+    assert f"artifacts in {store}" in header.stderr
+    rows = (RETARGETED_DIR / "h1" / "dance1_subject1.csv").read_text().splitlines()
+    fields = rows[99].split(",")
+    fields[3:7] = ["0", "0", "0", "0"]  # line 100: a root quaternion of norm 0
+    rows[99] = ",".join(fields)
+    folder = tmp_path / "csv"
+    (folder / "h1").mkdir(parents=True)
+    path = folder / "h1" / "dance1_subject1.csv"
+    path.write_text("\n".join(rows) + "\n")
+    env = {"RD_RETARGETED_DIR": str(folder), "RD_ARTIFACTS": str(tmp_path / "store")}
+    result = cli("run", "--robot", "h1", "--motion", "dance1_subject1", "--source", "csv", "--until", "import", env=env)
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines()[-1] == f"error: {path}:100: root quaternion has norm 0.000"
+
+
+@pytest.mark.parametrize("store", ["/sys/rd-store", "file"])
+def test_an_unwritable_store_is_one_line_naming_it(store: str, tmp_path: Path) -> None:
+    """/sys is mounted read-only; a store below a file cannot be made either."""
+    if store == "file":
+        (tmp_path / "file").write_text("")
+        store = str(tmp_path / "file" / "store")
+    for command in (("run", "--until", "parse"), ("view", "--out", str(tmp_path / "g1.rrd"))):
+        result = cli(*command, env={"RD_ARTIFACTS": store})
+        assert result.returncode == 2, result.stderr
+        last = result.stderr.strip().splitlines()[-1]
+        assert last.startswith(f"error: cannot write the artifact store {store} (")
+        assert last.endswith("); set RD_ARTIFACTS to a writable folder")
+        assert "Traceback" not in result.stderr

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 
 from rd_pipeline import __version__, paths
 from rd_pipeline.artifacts.keys import artifact_key, canonical_json
@@ -169,7 +170,7 @@ def execute(
 ) -> list[StageOutcome]:
     """Run the selected stages; cached artifacts are reused without doing any work, damaged ones are
     recomputed, and a key another process is computing is waited for, then reused."""
-    console = console or Console(stderr=True)
+    console = console or Console(stderr=True, emoji=False)
     selected, before = pipeline.select(start, until, only)
     planned = pipeline.plan(before + selected)
     usable = _usable_artifacts(pipeline, store, planned, selected, force, console)
@@ -190,22 +191,22 @@ def execute(
             refs[stage.provides] = existing
             continue
         if existing is None:
-            waiting = f"[yellow]wait[/]   {stage.name:<9} {label}  {entry.key}: another run is computing it"
+            waiting = f"[yellow]wait[/]   {stage.name:<9} {escape(label)}  {entry.key}: another run is computing it"
             with store.locked(stage.name, robot, pipeline.motion, entry.key, on_wait=partial(console.print, waiting)):
                 existing = _made_meanwhile(store, entry, robot, pipeline.motion, force)
                 if existing is None:
-                    console.print(f"[cyan]run[/]    {stage.name:<9} {label}  {entry.key}")
+                    console.print(f"[cyan]run[/]    {stage.name:<9} {escape(label)}  {entry.key}")
                     ref = _run_stage(pipeline, store, entry, refs, console, resume=resume)
                     seconds = time.perf_counter() - began
                     console.print(
-                        f"[green]done[/]   {stage.name:<9} {label}  {entry.key}  ({seconds:.2f} s) -> {ref.path}"
+                        f"[green]done[/]   {stage.name:<9} {escape(label)}  {entry.key}  ({seconds:.2f} s) -> {escape(str(ref.path))}"
                     )
                     refs[stage.provides] = ref
                     outcomes.append(StageOutcome(stage.name, entry.key, ref.path, False, seconds))
                     continue
         refs[stage.provides] = existing
         seconds = time.perf_counter() - began
-        console.print(f"[green]cached[/] {stage.name:<9} {label}  {entry.key}  ({seconds:.2f} s, no work)")
+        console.print(f"[green]cached[/] {stage.name:<9} {escape(label)}  {entry.key}  ({seconds:.2f} s, no work)")
         outcomes.append(StageOutcome(stage.name, entry.key, existing.path, True, seconds))
     return outcomes
 
@@ -241,7 +242,9 @@ def _usable_artifacts(
 def _whole(ref: ArtifactRef, full: bool, console: Console) -> bool:
     problem = ref.damage(full)
     if problem is not None:
-        console.print(f"[yellow]damaged[/] {ref.path}: {problem}; it will be recomputed", highlight=False)
+        console.print(
+            f"[yellow]damaged[/] {escape(str(ref.path))}: {escape(problem)}; it will be recomputed", highlight=False
+        )
     return problem is None
 
 

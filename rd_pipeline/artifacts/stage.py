@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from rd_pipeline.artifacts.store import ArtifactRef
@@ -102,7 +103,7 @@ def _plain_progress(console: Console, total: int, description: str) -> Callable[
         done += 1
         if done % step == 0 or done == total:
             minutes = (time.perf_counter() - began) / 60
-            console.print(f"  {description}: {done}/{total} ({minutes:.1f} min)  {status}", highlight=False)
+            console.print(escape(f"  {description}: {done}/{total} ({minutes:.1f} min)  {status}"), highlight=False)
 
     return advance
 

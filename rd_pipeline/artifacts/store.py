@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.files import file_sha256
 
 MANIFEST = "manifest.json"
@@ -95,9 +96,9 @@ class ArtifactStore:
         the new one is complete.
         """
         folder = self.folder(stage, robot, motion)
-        folder.mkdir(parents=True, exist_ok=True)
+        self._make_folder(folder)
         temp = folder / f"{TEMP_PREFIX}{key}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
-        temp.mkdir()
+        self._make_folder(temp)
         try:
             yield temp
             if not (temp / MANIFEST).is_file():
@@ -123,11 +124,14 @@ class ArtifactStore:
         """Hold the key's lock: a second run of the same key waits here (calling `on_wait` once)
         until the first has finished, then finds its artifact. The lock dies with its process."""
         folder = self.folder(stage, robot, motion)
-        folder.mkdir(parents=True, exist_ok=True)
+        self._make_folder(folder)
         path = folder / f"{LOCK_PREFIX}{key}"
         waited = False
         while True:
-            handle = path.open("a")
+            try:
+                handle = path.open("a")
+            except OSError as exc:
+                raise self._unwritable(exc) from None
             try:
                 fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
@@ -144,6 +148,18 @@ class ArtifactStore:
         finally:
             path.unlink(missing_ok=True)
             handle.close()
+
+    def _make_folder(self, folder: Path) -> None:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise self._unwritable(exc) from None
+
+    def _unwritable(self, exc: OSError) -> PipelineError:
+        """One line for a store that cannot be written (a read-only mount, no permission, a full disk)."""
+        return PipelineError(
+            f"cannot write the artifact store {self.root} ({exc.strerror}); set RD_ARTIFACTS to a writable folder"
+        )
 
     def remove_abandoned(self, stage: str, robot: str | None, motion: str) -> int:
         """Delete temporary folders left by killed processes (whose pid no longer runs)."""

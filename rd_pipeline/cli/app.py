@@ -9,6 +9,7 @@ from typing import Any
 
 import tyro
 from rich.console import Console
+from rich.markup import escape
 
 from rd_pipeline.cli import commands
 from rd_pipeline.cli.args import (
@@ -46,11 +47,12 @@ def main(argv: list[str] | None = None) -> int:
         args=argv,
         description="LAFAN1 mocap -> humanoid dance policies, one DAG per (robot, motion).",
     )
-    console = Console(stderr=True, soft_wrap=True)
+    # Names, values and paths users give are printed literally: no emoji codes (`:100:`), no markup.
+    console = Console(stderr=True, soft_wrap=True, emoji=False)
     try:
         return _dispatch(command, console)
     except PipelineError as exc:
-        console.print(f"[red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        console.print(f"[red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
         return 2
     except KeyboardInterrupt:
         console.print("[red]interrupted[/]: no partial artifact was kept")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import shlex
 import subprocess
 import sys
 from typing import Any
@@ -40,7 +41,7 @@ def run(cmd: Run, console: Console) -> int:
     )
     plan = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
     source = plan.pipeline.source
-    console.print(f"rd-pipeline: {cmd.robot}/{cmd.motion} from {source}, artifacts in {plan.store.root}")
+    console.print(escape(f"rd-pipeline: {cmd.robot}/{cmd.motion} from {source}, artifacts in {plan.store.root}"))
     outcomes = workspace.run(
         plan,
         start=cmd.from_,
@@ -92,18 +93,18 @@ def _flat(values: dict, prefix: str = "") -> dict[str, object]:
 def print_summary(plan: workspace.Plan, outcomes: list[StageOutcome], console: Console) -> None:
     """Per stage: cached or ran, time, headline metrics; then the report to read."""
     stages = {s.name: s for s in plan.pipeline.registry}
-    console.print(f"summary {plan.robot}/{plan.motion}:", highlight=False)
+    console.print(escape(f"summary {plan.robot}/{plan.motion}:"), highlight=False)
     report = None
     for outcome in outcomes:
         stage = stages[outcome.name]
         metrics = workspace.metrics(outcome.path)
         shown = "  ".join(f"{name}={_short(metrics[name])}" for name in stage.headline if name in metrics)
         state = "cached" if outcome.cached else "ran"
-        console.print(f"  {outcome.name:<9} {state:<6} {outcome.seconds:7.1f} s  {shown}", highlight=False)
+        console.print(escape(f"  {outcome.name:<9} {state:<6} {outcome.seconds:7.1f} s  {shown}"), highlight=False)
         if stage.report:
             report = outcome.path / stage.report
     if report is not None:
-        console.print(f"report: {report}", highlight=False)
+        console.print(escape(f"report: {report}"), highlight=False)
 
 
 def _short(value: object) -> str:
@@ -183,9 +184,15 @@ def view(cmd: View, console: Console) -> int:
     if out is None and not display_available():
         out = planned.store.root / "views" / f"{cmd.robot}_{cmd.motion}.rrd"
         console.print("no display here (DISPLAY and WAYLAND_DISPLAY are unset): writing the recording instead")
-    path = record_motion(cmd.robot, cmd.motion, artifacts, out, tracked)
+    try:
+        path = record_motion(cmd.robot, cmd.motion, artifacts, out, tracked)
+    except OSError as exc:
+        raise PipelineError(f"cannot write the recording {exc.filename or out} ({exc.strerror})") from None
     if path is not None:
-        console.print(f"wrote {path}; open it with `rerun {path}` (pip package rerun-sdk) on a machine with a display")
+        hint = shlex.quote(str(path))
+        console.print(
+            escape(f"wrote {path}; open it with `rerun {hint}` (pip package rerun-sdk) on a machine with a display")
+        )
         if cmd.spawn:
             subprocess.Popen([sys.executable, "-m", "rerun", str(path)])
     return 0
@@ -212,9 +219,13 @@ def export_motion(cmd: ExportMotion, console: Console) -> int:
     else:
         fps = cmd.fps or reference.fps
         frames, missing = write_mjlab_npz(reference, robot, cmd.out, fps)
-    console.print(f"wrote {cmd.out}: {frames} frames at {fps:g} fps from {made_by} {folder.name}", highlight=False)
+    console.print(
+        escape(f"wrote {cmd.out}: {frames} frames at {fps:g} fps from {made_by} {folder.name}"), highlight=False
+    )
     if missing:
-        console.print(f"mjlab's {cmd.robot} model has joints this one lacks, written as 0: {', '.join(missing)}")
+        console.print(
+            escape(f"mjlab's {cmd.robot} model has joints this one lacks, written as 0: {', '.join(missing)}")
+        )
     return 0
 
 
@@ -222,7 +233,7 @@ def fetch_lafan(cmd: FetchLafan, console: Console) -> int:
     from rd_pipeline.motion.lafan_download import install_lafan
 
     installed = install_lafan(cmd.zip, paths.lafan_dir(), console)
-    console.print(f"installed {len(installed)} BVH files into {paths.lafan_dir()}")
+    console.print(escape(f"installed {len(installed)} BVH files into {paths.lafan_dir()}"))
     return 0
 
 
@@ -297,6 +308,6 @@ def ablate(cmd: Ablate, console: Console) -> int:
     trials = sweeps.make_trials(list(cmd.robots), list(cmd.motions), list(cmd.seeds), variants)
     results, out = _run_trials(cmd, trials, f"ablate-{cmd.study}", console)
     path = write_ablation(cmd.study, ablation_table(cmd.study, chosen, results), results, out)
-    console.print(path.read_text(), highlight=False)
-    console.print(f"wrote {path}")
+    console.print(escape(path.read_text()), highlight=False)
+    console.print(escape(f"wrote {path}"))
     return 0 if all(r.ok for r in results) else 1

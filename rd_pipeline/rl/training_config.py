@@ -3,12 +3,13 @@ sampler settings (profiles set these; they are the `train` stage's params)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion import MIN_MOTION_S
-from rd_pipeline.params import require_positive
+from rd_pipeline.params import ParamRangeError, require_positive
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.sampling.sampler import SamplerConfig
@@ -39,6 +40,27 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         require_positive(self, "iterations", "checkpoint_every", "scoring_starts")
+        clip_seconds(self.clip)
+
+
+def clip_seconds(clip: str) -> tuple[float, float | None]:
+    """`START:END` seconds (either may be empty: the motion's start or end) as (start, end or None);
+    a malformed or empty range raises `ParamRangeError`, so it is refused when params are read."""
+    if not clip:
+        return 0.0, None
+    parts = clip.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        start = float(parts[0]) if parts[0] else 0.0
+        end = float(parts[1]) if parts[1] else None
+    except ValueError:
+        raise ParamRangeError("clip", f"must be START:END in seconds, got '{clip}'") from None
+    if not (math.isfinite(start) and start >= 0):
+        raise ParamRangeError("clip", f"must start at 0 s or later, got '{clip}'")
+    if end is not None and not (math.isfinite(end) and end > start + MIN_MOTION_S):
+        raise ParamRangeError("clip", f"must end more than {MIN_MOTION_S:g} s after it starts, got '{clip}'")
+    return start, end
 
 
 def clip_frames(clip: str, fps: float, n_frames: int, warn: Callable[[str], None] = print) -> tuple[int, int]:
@@ -47,10 +69,10 @@ def clip_frames(clip: str, fps: float, n_frames: int, warn: Callable[[str], None
     if not clip:
         return 0, n_frames
     try:
-        start_s, end_s = (float(x) if x else None for x in clip.split(":"))
-    except ValueError:
-        raise PipelineError(f"train.clip must be START:END in seconds, got '{clip}'") from None
-    start = round((start_s or 0.0) * fps)
+        start_s, end_s = clip_seconds(clip)
+    except ParamRangeError as exc:
+        raise PipelineError(f"train.{exc}") from None
+    start = round(start_s * fps)
     end = n_frames if end_s is None else round(end_s * fps)
     if end > n_frames:
         warn(
