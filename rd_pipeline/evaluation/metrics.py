@@ -40,13 +40,13 @@ def summarize(rollouts: list[Rollout], control_hz: float) -> dict[str, float | N
     return out
 
 
-def drift(rollouts: list[Rollout], rng: np.random.Generator, resamples: int = 1000) -> list[dict[str, float]]:
+def drift(rollouts: list[Rollout], rng: np.random.Generator, resamples: int = 1000) -> list[dict[str, float | None]]:
     """E_g_mpbpe in `DRIFT_BINS` relative time bins of each rollout, with a bootstrap 95% CI.
 
     Each rollout contributes its mean error per bin; the CI resamples rollouts (or, with a single
     rollout, its steps within the bin)."""
     per_rollout = [np.array_split(r.errors["E_g_mpbpe"], DRIFT_BINS) for r in rollouts if r.steps >= DRIFT_BINS]
-    out = []
+    out: list[dict[str, float | None]] = []
     for b in range(DRIFT_BINS):
         samples = [chunk[b] for chunk in per_rollout]
         if not samples:

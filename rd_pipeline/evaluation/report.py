@@ -33,14 +33,34 @@ def _cell(value: object, digits: int = 2) -> str:
 
 def write_markdown(report: dict, out_dir: Path) -> None:
     """Tables shaped like the paper's: survival protocols, then tracking errors, then drift."""
-    lines = [
+    sections = [
+        _title(report),
+        _survival_table(report),
+        _tracking_table(report),
+        _drift_table(report),
+    ]
+    randomized = report.get("randomized")
+    if randomized:
+        sections.append(_randomized_table(randomized))
+    text = "\n\n".join("\n".join(lines) for lines in sections)
+    (out_dir / REPORT_MD).write_text(text + "\n")
+
+
+def _title(report: dict) -> list[str]:
+    reference = report["reference"]
+    rates = report["rates"]
+    return [
         f"# Sim2sim validation: {report['robot']} / {report['motion']}",
         "",
-        f"Policy `{report['policy_key']}` on reference `{report['reference']['key']}` frames "
-        f"{report['reference']['start_frame']}–{report['reference']['end_frame']} "
-        f"({report['reference']['duration_s']:.1f} s), nominal physics, deploy loop at "
-        f"{report['rates']['control_hz']:.0f} Hz policy / {report['rates']['physics_hz']:.0f} Hz physics.",
-        "",
+        f"Policy `{report['policy_key']}` on reference `{reference['key']}` frames "
+        f"{reference['start_frame']}–{reference['end_frame']} "
+        f"({reference['duration_s']:.1f} s), nominal physics, deploy loop at "
+        f"{rates['control_hz']:.0f} Hz policy / {rates['physics_hz']:.0f} Hz physics.",
+    ]
+
+
+def _survival_table(report: dict) -> list[str]:
+    lines = [
         "## Survival",
         "",
         "| controller | start-zero survival (s) | completion % | mean survival (s) | "
@@ -54,8 +74,11 @@ def write_markdown(report: dict, out_dir: Path) -> None:
         cells = [_cell(zero["mean_survival_s"]), _cell(grid["completion_pct"]), _cell(grid["mean_survival_s"])]
         cells += [_cell(grid[f"success_{t}s_pct"]) for t in SUCCESS_THRESHOLDS_S]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    lines += [
-        "",
+    return lines
+
+
+def _tracking_table(report: dict) -> list[str]:
+    lines = [
         "## Tracking error (fixed grid, every step survived)",
         "",
         "| controller | " + " | ".join(ERROR_METRICS) + " |",
@@ -64,10 +87,12 @@ def write_markdown(report: dict, out_dir: Path) -> None:
     for name in CONTROLLERS:
         grid = report["nominal"][name]["fixed_grid"]
         lines.append(f"| {name} | " + " | ".join(_cell(grid[m]) for m in ERROR_METRICS) + " |")
-    lines += [
-        "",
-        "Units: E_g_mpbpe, E_mpbpe mm; E_mpjpe mrad; E_mpjve mrad/s; E_mpbve mm/s.",
-        "",
+    lines += ["", "Units: E_g_mpbpe, E_mpbpe mm; E_mpjpe mrad; E_mpjve mrad/s; E_mpbve mm/s."]
+    return lines
+
+
+def _drift_table(report: dict) -> list[str]:
+    lines = [
         f"## Drift (E_g_mpbpe per relative time bin, mean and bootstrap 95% CI, {DRIFT_BINS} bins)",
         "",
         "| controller | " + " | ".join(f"bin {b + 1}" for b in range(DRIFT_BINS)) + " |",
@@ -75,29 +100,31 @@ def write_markdown(report: dict, out_dir: Path) -> None:
     ]
     for name in CONTROLLERS:
         bins = report["nominal"][name]["drift"]
+        lines.append(f"| {name} | " + " | ".join(_drift_cell(b) for b in bins) + " |")
+    return lines
+
+
+def _drift_cell(drift_bin: dict) -> str:
+    """Mean [CI] of one drift bin; a dash where no rollout lasted long enough to fill it."""
+    if drift_bin["mean"] is None:
+        return "–"
+    return f"{drift_bin['mean']:.1f} [{drift_bin['ci_low']:.1f}, {drift_bin['ci_high']:.1f}]"
+
+
+def _randomized_table(randomized: dict) -> list[str]:
+    lines = [
+        f"## Randomized physics ({len(randomized['seeds'])} seeds, mean ± 95% Student-t CI)",
+        "",
+        "| controller | completion % | mean survival (s) | E_g_mpbpe | E_mpjpe |",
+        "|---|---|---|---|---|",
+    ]
+    for name in CONTROLLERS:
+        row = randomized[name]
         lines.append(
-            f"| {name} | "
-            + " | ".join(
-                "–" if b["mean"] is None else f"{b['mean']:.1f} [{b['ci_low']:.1f}, {b['ci_high']:.1f}]" for b in bins
-            )
-            + " |"
+            f"| {name} | {_cell(row['completion_pct'])} | {_cell(row['mean_survival_s'])} | "
+            f"{_cell(row['E_g_mpbpe'])} | {_cell(row['E_mpjpe'])} |"
         )
-    randomized = report.get("randomized")
-    if randomized:
-        lines += [
-            "",
-            f"## Randomized physics ({len(randomized['seeds'])} seeds, mean ± 95% Student-t CI)",
-            "",
-            "| controller | completion % | mean survival (s) | E_g_mpbpe | E_mpjpe |",
-            "|---|---|---|---|---|",
-        ]
-        for name in CONTROLLERS:
-            row = randomized[name]
-            lines.append(
-                f"| {name} | {_cell(row['completion_pct'])} | {_cell(row['mean_survival_s'])} | "
-                f"{_cell(row['E_g_mpbpe'])} | {_cell(row['E_mpjpe'])} |"
-            )
-    (out_dir / REPORT_MD).write_text("\n".join(lines) + "\n")
+    return lines
 
 
 def plot_report(report: dict, out_dir: Path) -> None:

@@ -51,6 +51,29 @@ class Rollout:
     """(steps + 1, nbody, 4) wxyz (first rollout only)."""
 
 
+@dataclass(frozen=True)
+class _Checks:
+    """What each control step is measured against: where the checked bodies and joints sit in
+    the model (ids) and in the reference (`_ref` columns)."""
+
+    tracked: np.ndarray
+    tracked_ref: np.ndarray
+    termination: np.ndarray
+    termination_ref: np.ndarray
+    root: int
+    root_ref: int
+    allowed: set[int]
+    """Bodies that may touch the floor: the feet and the world."""
+    floor: list[int]
+    """The world body's geoms."""
+    ref_joint: np.ndarray
+    """Reference column of each policy joint."""
+    qpos_idx: np.ndarray
+    """qpos address of each policy joint."""
+    dof_idx: np.ndarray
+    """qvel address of each policy joint."""
+
+
 def run_rollouts(
     spec: PolicySpec,
     models: list[mujoco.MjModel],
@@ -62,33 +85,14 @@ def run_rollouts(
 ) -> list[Rollout]:
     """Roll out `policy` from each start frame (rollout k on `models[k]`), all in one batched loop;
     the first rollout also keeps its body poses for the recording."""
-    count, dt = len(start_frames), 1.0 / spec.get("rates.control_hz")
+    count = len(start_frames)
+    dt = 1.0 / spec.get("rates.control_hz")
     model = models[0]
     physics = MujocoCpuBackend(models, protocol.threads)
     state = physics.state
     controller = DeployController(spec, model, reference, count)
-    body_id = lambda names: np.array([model.body(n).id for n in names])
-    ref_body = lambda names: np.array([reference.body_names.index(n) for n in names])
-    tracked, tracked_ref = body_id(bodies.tracked), ref_body(bodies.tracked)
-    term, term_ref = body_id(bodies.termination), ref_body(bodies.termination)
-    root, root_ref = model.body(bodies.root).id, reference.body_names.index(bodies.root)
-    allowed = set(body_id(bodies.feet).tolist()) | {0}
-    floor = [g for g in range(model.ngeom) if model.geom_bodyid[g] == 0]
-    policy_joints = spec.get("joints.policy")
-    ref_joint = np.array([reference.joint_names.index(j) for j in policy_joints])
-    qpos0 = np.zeros((count, model.nq))
-    qvel0 = np.zeros((count, model.nv))
-    f = start_frames
-    qpos0[:, :3], qpos0[:, 3:7] = reference.root_pos[f], reference.root_quat[f]
-    qvel0[:, :3] = reference.body_lin_vel_w[f, root_ref]
-    for k in range(count):
-        rot = np.empty(9)
-        mujoco.mju_quat2Mat(rot, reference.root_quat[f[k]])
-        qvel0[k, 3:6] = rot.reshape(3, 3).T @ reference.body_ang_vel_w[f[k], root_ref]
-    for j, name in enumerate(reference.joint_names):
-        joint = model.joint(name)
-        qpos0[:, model.jnt_qposadr[joint.id]] = reference.joint_pos[f, j]
-        qvel0[:, model.jnt_dofadr[joint.id]] = reference.joint_vel[f, j]
+    checks = _checks(model, reference, bodies, spec.get("joints.policy"), controller)
+    qpos0, qvel0 = _initial_state(model, reference, start_frames, checks.root_ref)
     physics.set_state(torch.arange(count), torch.from_numpy(qpos0), torch.from_numpy(qvel0))
     controller.reset(state.qpos.numpy(), state.qvel.numpy(), start_frames)
 
@@ -98,7 +102,7 @@ def run_rollouts(
     steps = np.zeros(count, dtype=np.int64)
     errors: list[dict[str, np.ndarray]] = []
     poses = [(state.body_pos[0].numpy().copy(), state.body_quat[0].numpy().copy())]
-    previous_pos = state.body_pos[:, tracked].numpy().copy()
+    previous_pos = state.body_pos[:, checks.tracked].numpy().copy()
     obs = controller.current()
     while alive.any():
         action = policy(obs.astype(np.float32))
@@ -109,43 +113,142 @@ def run_rollouts(
         xpos = state.body_pos.numpy().copy()
         xquat = state.body_quat.numpy().copy()
         frame = controller.frame
-        ref_pos = reference.body_pos_w[frame][:, tracked_ref]
-        pos = xpos[:, tracked]
-        rel = pos - xpos[:, root : root + 1]
-        ref_rel = ref_pos - reference.body_pos_w[frame][:, root_ref : root_ref + 1]
+        pos = xpos[:, checks.tracked]
         velocity = (pos - previous_pos) / dt
         previous_pos = pos
-        errors.append(
-            {
-                "E_g_mpbpe": 1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean(-1),
-                "E_mpbpe": 1000 * np.linalg.norm(rel - ref_rel, axis=-1).mean(-1),
-                "E_mpjpe": 1000
-                * np.abs(qpos[:, controller.qpos_idx] - reference.joint_pos[frame][:, ref_joint]).mean(-1),
-                "E_mpjve": 1000
-                * np.abs(qvel[:, controller.dof_idx] - reference.joint_vel[frame][:, ref_joint]).mean(-1),
-                "E_mpbve": 1000
-                * np.linalg.norm(velocity - reference.body_lin_vel_w[frame][:, tracked_ref], axis=-1).mean(-1),
-            }
-        )
+        errors.append(_step_errors(checks, reference, frame, qpos, qvel, xpos, velocity))
         poses.append((xpos[0], xquat[0]))
-        tilted = bad_orientation(
-            torch.from_numpy(xquat[:, root]),
-            torch.from_numpy(reference.body_quat_w[frame, root_ref]),
-            protocol.orientation_limit_rad,
-        )
-        far = motion_far(
-            torch.from_numpy(xpos[:, term]),
-            torch.from_numpy(reference.body_pos_w[frame][:, term_ref]),
-            protocol.motion_far_m,
-        )
-        touching = np.array([_bad_contact(m, d, floor, allowed) for m, d in zip(models, physics.datas)])
-        failed = tilted.numpy() | far.numpy() | touching
+        off_reference = _off_reference(checks, reference, frame, xpos, xquat, protocol)
+        failed = off_reference | _touching(checks, models, physics.datas)
         steps += alive
         terminated |= alive & failed
         alive &= ~failed & (frame < last)
         obs = controller.observe(qpos, qvel)
-    out = []
+    out = _rollouts(start_frames, steps, terminated, last, errors, poses)
+    physics.close()
+    return out
+
+
+def _checks(
+    model: mujoco.MjModel,
+    reference: ReferenceMotion,
+    bodies: BodySets,
+    policy_joints: list[str],
+    controller: DeployController,
+) -> _Checks:
+    """Look up the checked bodies and joints in the model and in the reference."""
+
+    def body_id(names: tuple[str, ...]) -> np.ndarray:
+        return np.array([model.body(n).id for n in names])
+
+    def ref_body(names: tuple[str, ...]) -> np.ndarray:
+        return np.array([reference.body_names.index(n) for n in names])
+
+    return _Checks(
+        tracked=body_id(bodies.tracked),
+        tracked_ref=ref_body(bodies.tracked),
+        termination=body_id(bodies.termination),
+        termination_ref=ref_body(bodies.termination),
+        root=model.body(bodies.root).id,
+        root_ref=reference.body_names.index(bodies.root),
+        allowed=set(body_id(bodies.feet).tolist()) | {0},
+        floor=[g for g in range(model.ngeom) if model.geom_bodyid[g] == 0],
+        ref_joint=np.array([reference.joint_names.index(j) for j in policy_joints]),
+        qpos_idx=controller.qpos_idx,
+        dof_idx=controller.dof_idx,
+    )
+
+
+def _initial_state(
+    model: mujoco.MjModel,
+    reference: ReferenceMotion,
+    start_frames: np.ndarray,
+    root_ref: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(R, nq) qpos and (R, nv) qvel of the reference at each start frame (the base's angular
+    velocity turned into its own frame, as MuJoCo's free joint holds it)."""
+    count = len(start_frames)
+    qpos0 = np.zeros((count, model.nq))
+    qvel0 = np.zeros((count, model.nv))
+    f = start_frames
+    qpos0[:, :3] = reference.root_pos[f]
+    qpos0[:, 3:7] = reference.root_quat[f]
+    qvel0[:, :3] = reference.body_lin_vel_w[f, root_ref]
     for k in range(count):
+        rot = np.empty(9)
+        mujoco.mju_quat2Mat(rot, reference.root_quat[f[k]])
+        qvel0[k, 3:6] = rot.reshape(3, 3).T @ reference.body_ang_vel_w[f[k], root_ref]
+    for j, name in enumerate(reference.joint_names):
+        joint = model.joint(name)
+        qpos0[:, model.jnt_qposadr[joint.id]] = reference.joint_pos[f, j]
+        qvel0[:, model.jnt_dofadr[joint.id]] = reference.joint_vel[f, j]
+    return qpos0, qvel0
+
+
+def _step_errors(
+    checks: _Checks,
+    reference: ReferenceMotion,
+    frame: np.ndarray,
+    qpos: np.ndarray,
+    qvel: np.ndarray,
+    xpos: np.ndarray,
+    velocity: np.ndarray,
+) -> dict[str, np.ndarray]:
+    """(R,) each error of this step, see `Rollout.errors`; `velocity` is the tracked bodies'."""
+    ref_pos = reference.body_pos_w[frame][:, checks.tracked_ref]
+    pos = xpos[:, checks.tracked]
+    rel = pos - xpos[:, checks.root : checks.root + 1]
+    ref_rel = ref_pos - reference.body_pos_w[frame][:, checks.root_ref : checks.root_ref + 1]
+    joint_pos_error = qpos[:, checks.qpos_idx] - reference.joint_pos[frame][:, checks.ref_joint]
+    joint_vel_error = qvel[:, checks.dof_idx] - reference.joint_vel[frame][:, checks.ref_joint]
+    body_vel_error = velocity - reference.body_lin_vel_w[frame][:, checks.tracked_ref]
+    return {
+        "E_g_mpbpe": 1000 * np.linalg.norm(pos - ref_pos, axis=-1).mean(-1),
+        "E_mpbpe": 1000 * np.linalg.norm(rel - ref_rel, axis=-1).mean(-1),
+        "E_mpjpe": 1000 * np.abs(joint_pos_error).mean(-1),
+        "E_mpjve": 1000 * np.abs(joint_vel_error).mean(-1),
+        "E_mpbve": 1000 * np.linalg.norm(body_vel_error, axis=-1).mean(-1),
+    }
+
+
+def _off_reference(
+    checks: _Checks,
+    reference: ReferenceMotion,
+    frame: np.ndarray,
+    xpos: np.ndarray,
+    xquat: np.ndarray,
+    protocol: Protocol,
+) -> np.ndarray:
+    """(R,) the pelvis tilted or a termination body too far from the reference (the training terms)."""
+    tilted = bad_orientation(
+        torch.from_numpy(xquat[:, checks.root]),
+        torch.from_numpy(reference.body_quat_w[frame, checks.root_ref]),
+        protocol.orientation_limit_rad,
+    )
+    far = motion_far(
+        torch.from_numpy(xpos[:, checks.termination]),
+        torch.from_numpy(reference.body_pos_w[frame][:, checks.termination_ref]),
+        protocol.motion_far_m,
+    )
+    return tilted.numpy() | far.numpy()
+
+
+def _touching(checks: _Checks, models: list[mujoco.MjModel], datas: list[mujoco.MjData]) -> np.ndarray:
+    """(R,) a body other than the feet touches the floor."""
+    return np.array([_bad_contact(m, d, checks.floor, checks.allowed) for m, d in zip(models, datas)])
+
+
+def _rollouts(
+    start_frames: np.ndarray,
+    steps: np.ndarray,
+    terminated: np.ndarray,
+    last: int,
+    errors: list[dict[str, np.ndarray]],
+    poses: list[tuple[np.ndarray, np.ndarray]],
+) -> list[Rollout]:
+    """Per rollout, the steps it survived; the body poses for the first only."""
+    out = []
+    for k in range(len(start_frames)):
         n = int(steps[k])
         out.append(
             Rollout(
@@ -158,7 +261,6 @@ def run_rollouts(
                 body_quat=np.stack([p[1] for p in poses[: n + 1]]) if k == 0 else None,
             )
         )
-    physics.close()
     return out
 
 

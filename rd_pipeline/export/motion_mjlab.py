@@ -81,7 +81,7 @@ def write_mjlab_npz(reference: ReferenceMotion, robot: Robot, path: Path, fps: f
     }
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_name(f".{path.name}.partial.npz")
-    np.savez(partial, **arrays)
+    np.savez(partial, **arrays)  # type: ignore[arg-type]  # numpy's stub reads ** as allow_pickle
     partial.replace(path)
     missing = [name for name in hinges if name not in reference.joint_names]
     return len(layout), missing

@@ -60,6 +60,7 @@ def export_onnx(module: torch.nn.Module, observation_size: int, spec: PolicySpec
         dynamic_shapes=({0: batch},),
         verbose=False,
     )
+    assert program is not None  # the dynamo exporter always returns its program
     model = program.model_proto
     for key, value in onnx_metadata(spec).items():
         entry = model.metadata_props.add()

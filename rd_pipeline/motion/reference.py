@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -75,7 +76,7 @@ class ReferenceMotion:
             missing = [f.name for f in fields(cls) if f.name not in data]
             if missing:
                 raise PipelineError(f"{path}: reference motion lacks field '{missing[0]}'")
-            values = {f.name: data[f.name] for f in fields(cls)}
+            values: dict[str, Any] = {f.name: data[f.name] for f in fields(cls)}
         values["fps"] = float(values["fps"])
         values["joint_names"] = tuple(str(n) for n in values["joint_names"])
         values["body_names"] = tuple(str(n) for n in values["body_names"])

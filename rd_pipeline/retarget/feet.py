@@ -3,6 +3,8 @@ bent to leave and land on the plants, lifted clear of the floor."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -12,6 +14,28 @@ from rd_pipeline.retarget.config import PlantDrift
 from rd_pipeline.retarget.frames import yaw_and_pitch, yaw_pitch_frame
 from rd_pipeline.retarget.smoothing import smoothstep
 from rd_pipeline.robots import Robot
+
+
+@dataclass(frozen=True)
+class _Plant:
+    """Frames [start, end) where the foot target stays at `point`."""
+
+    start: int
+    end: int
+    point: np.ndarray
+    """(3,) the planted position: the free target's first xy, the sole height."""
+
+
+@dataclass(frozen=True)
+class _Swing:
+    """Frames [start, end) between two plants (or a plant and an end of the clip)."""
+
+    start: int
+    end: int
+    leaves: _Plant | None
+    """The plant the foot lifts off from (None before the first plant)."""
+    lands: _Plant | None
+    """The plant the foot comes down on (None after the last plant)."""
 
 
 def plant_foot(
@@ -42,78 +66,165 @@ def plant_foot(
     """
     n = free.shape[0]
     sole = float(-sole_vertices[:, 2].min())
-    heading = np.unwrap(yaw_and_pitch(forward)[0])
-    position = free.copy()
-    planted_weight = np.zeros(n)
-    lift = np.zeros(n)
-    anchors = []
     half_swing = max(1, round(0.5 * drift.swing_s * fps))
     contact = _split_drifting_plants(contact, free, human_path, drift, half_swing)
-    for start, end in contact_runs(contact):
-        anchors.append((start, end, np.array([*free[start, :2], sole])))
-        position[start:end] = anchors[-1][2]
-        # A planted foot keeps one heading, within what the leg's vertical-axis joints can turn from
-        # the pelvis (the H1's hip yaw only spans +-0.43 rad).
-        relative = _wrap(np.mean(heading[start:end]) - np.mean(pelvis_yaw[start:end]))
-        heading[start:end] = np.mean(pelvis_yaw[start:end]) + np.clip(relative, *yaw_range)
-        planted_weight[start:end] = 1.0
+    plants = _plants(contact, free, sole)
+    heading = _planted_heading(forward, plants, pelvis_yaw, yaw_range)
     flat = Rotation.from_matrix(yaw_pitch_frame(heading, np.zeros(n)))
-    human = Rotation.from_matrix(human_rotation)
-    calibration = contact if contact.any() else np.ones(n, dtype=bool)
-    offset = (human[calibration].inv() * flat[calibration]).mean()
-    swinging = human * offset
-    # A foot planted on its toes or its instep (kneeling, crouching) keeps the human's tilt: laying
-    # it flat would lift the knees off the floor.
-    tilt = np.arccos(np.clip(swinging.as_matrix()[:, 2, 2], -1.0, 1.0))
-    tilted = smoothstep((tilt - tilt_limit) / tilt_limit)  # eases in over one more `tilt_limit`
-    for start, end, _ in anchors:
-        run = slice(start, end)
-        if tilted[run].any():
-            delta = (flat[run].inv() * swinging[run]).as_rotvec()
-            flat = _assign(flat, run, flat[run] * Rotation.from_rotvec(delta * tilted[run, None]))
-    # Swing: add a correction that blends from the previous plant's offset to the next one's, so
-    # the foot leaves and lands exactly where it is planted. A robot foot near the floor must not
-    # slide: it first rises to `clearance`, then travels, then comes down on its plant.
+    swinging = _swing_orientation(human_rotation, flat, contact)
+    flat = _keep_planted_tilt(flat, swinging, plants, tilt_limit)
+    position = free.copy()
+    for plant in plants:
+        position[plant.start : plant.end] = plant.point
+    lift = np.zeros(n)
     ramp = max(1, int(round(0.1 * fps)))
     rise = max(1, int(round(lift_time_s * fps)))
-    edges = [0] + [x for start, end, _ in anchors for x in (start, end)] + [n]
-    for i in range(len(anchors) + 1):
-        a = edges[2 * i]
-        b = edges[2 * i + 1]
-        if b <= a:
-            continue
-        before = anchors[i - 1][2] - free[a - 1] if i > 0 else None
-        after = anchors[i][2] - free[b] if i < len(anchors) else None
-        if before is None and after is None:  # no contact in the whole clip: only keep feet above ground
+    for swing in _swings(plants, n):
+        offsets = _swing_offsets(swing, free)
+        if offsets is None:  # no contact in the whole clip: only keep feet above ground
             lift[:] = clearance
             continue
-        before = after if before is None else before
-        after = before if after is None else after
-        t = np.arange(a, b)
-        since = t - a + 1 if i > 0 else np.full(b - a, n)
-        until = b - t if i < len(anchors) else np.full(b - a, n)
-        # Horizontal travel happens between the rise and the descent (time-warped human path).
-        hold = min(rise, (b - a) // 3)
-        lo = a - 1 if i > 0 else a
-        hi = b if i < len(anchors) else b - 1
-        warp = lo + (hi - lo) * np.clip((t - lo - hold) / max(hi - lo - 2 * hold, 1), 0.0, 1.0)
-        path = np.stack([np.interp(warp, np.arange(n), free[:, k]) for k in range(3)], axis=1)
-        s = smoothstep(np.clip((warp - lo) / max(hi - lo, 1), 0.0, 1.0))
-        position[a:b] = path + (1.0 - s)[:, None] * before + s[:, None] * after
-        lift[a:b] = clearance * smoothstep(np.clip(np.minimum(since, until) / rise, 0.0, 1.0))
-        planted_weight[a:b] = 1.0 - smoothstep(np.clip(np.minimum(since, until) / ramp, 0.0, 1.0))
-        # Near a plant, ease toward that plant's flat orientation.
-        nearest = np.where(since <= until, a - 1, b) if 0 < i < len(anchors) else np.full(b - a, a - 1 if i > 0 else b)
-        flat_near = flat[np.clip(nearest, 0, n - 1)]
-        delta = (swinging[a:b].inv() * flat_near).as_rotvec()
-        swinging_blended = swinging[a:b] * Rotation.from_rotvec(delta * planted_weight[a:b, None])
-        flat = _assign(flat, slice(a, b), swinging_blended)
+        frames = slice(swing.start, swing.end)
+        position[frames] = _swing_path(free, swing, rise, offsets)
+        since, until = _frames_from_plants(swing, n)
+        lift[frames] = clearance * _eased_closeness(since, until, rise)
+        weight = 1.0 - _eased_closeness(since, until, ramp)
+        flat = _ease_to_plants(flat, swinging, swing, _nearest_plant_frame(swing, since, until), weight)
     rotation = flat.as_matrix()
     # The lowest point of the (possibly pitched) foot clears the floor by `lift`: a pointed toe
     # near the floor would otherwise drag along it.
     depth = -np.einsum("tij,vj->tvi", rotation, sole_vertices)[..., 2].min(axis=1)
     position[:, 2] = np.maximum(position[:, 2], lift + depth)
     return position, rotation, lift, contact
+
+
+def _plants(contact: np.ndarray, free: np.ndarray, sole: float) -> list[_Plant]:
+    """One plant per contact run, where the free target is when the run starts."""
+    return [_Plant(start, end, np.array([*free[start, :2], sole])) for start, end in contact_runs(contact)]
+
+
+def _planted_heading(
+    forward: np.ndarray,
+    plants: list[_Plant],
+    pelvis_yaw: np.ndarray,
+    yaw_range: tuple[float, float],
+) -> np.ndarray:
+    """(T,) foot heading: the human toe line's, held at one value per plant."""
+    heading = np.unwrap(yaw_and_pitch(forward)[0])
+    for plant in plants:
+        run = slice(plant.start, plant.end)
+        # A planted foot keeps one heading, within what the leg's vertical-axis joints can turn from
+        # the pelvis (the H1's hip yaw only spans +-0.43 rad).
+        relative = _wrap(np.mean(heading[run]) - np.mean(pelvis_yaw[run]))
+        heading[run] = np.mean(pelvis_yaw[run]) + np.clip(relative, *yaw_range)
+    return heading
+
+
+def _swing_orientation(human_rotation: np.ndarray, flat: Rotation, contact: np.ndarray) -> Rotation:
+    """The human foot turned by the one offset that best lays it on `flat` over the plants."""
+    human = Rotation.from_matrix(human_rotation)
+    calibration = contact if contact.any() else np.ones(len(contact), dtype=bool)
+    offset = (human[calibration].inv() * flat[calibration]).mean()
+    return human * offset
+
+
+def _keep_planted_tilt(flat: Rotation, swinging: Rotation, plants: list[_Plant], tilt_limit: float) -> Rotation:
+    """A foot planted on its toes or its instep (kneeling, crouching) keeps the human's tilt:
+    laying it flat would lift the knees off the floor."""
+    tilt = np.arccos(np.clip(swinging.as_matrix()[:, 2, 2], -1.0, 1.0))
+    tilted = smoothstep((tilt - tilt_limit) / tilt_limit)  # eases in over one more `tilt_limit`
+    for plant in plants:
+        run = slice(plant.start, plant.end)
+        if tilted[run].any():
+            delta = (flat[run].inv() * swinging[run]).as_rotvec()
+            flat = _assign(flat, run, flat[run] * Rotation.from_rotvec(delta * tilted[run, None]))
+    return flat
+
+
+def _swings(plants: list[_Plant], n: int) -> list[_Swing]:
+    """The non-empty stretches before, between and after the plants, in time order."""
+    edges = [0] + [x for plant in plants for x in (plant.start, plant.end)] + [n]
+    swings = []
+    for i in range(len(plants) + 1):
+        leaves = plants[i - 1] if i > 0 else None
+        lands = plants[i] if i < len(plants) else None
+        if edges[2 * i + 1] > edges[2 * i]:
+            swings.append(_Swing(edges[2 * i], edges[2 * i + 1], leaves, lands))
+    return swings
+
+
+def _swing_offsets(swing: _Swing, free: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """How far the free path misses the plant the swing leaves and the one it lands on; where
+    one plant is missing the other's offset stands for both, and with neither there is none.
+
+    Adding a blend of the two to the swing makes the foot leave and land exactly where it is planted.
+    """
+    if swing.leaves is not None and swing.lands is not None:
+        return swing.leaves.point - free[swing.start - 1], swing.lands.point - free[swing.end]
+    if swing.leaves is not None:
+        before = swing.leaves.point - free[swing.start - 1]
+        return before, before
+    if swing.lands is not None:
+        after = swing.lands.point - free[swing.end]
+        return after, after
+    return None
+
+
+def _swing_path(
+    free: np.ndarray,
+    swing: _Swing,
+    rise: int,
+    offsets: tuple[np.ndarray, np.ndarray],
+) -> np.ndarray:
+    """The swing's positions: the free path, time-warped so the horizontal travel happens between
+    the rise and the descent (a robot foot near the floor must not slide), plus the plant offsets."""
+    a = swing.start
+    b = swing.end
+    t = np.arange(a, b)
+    hold = min(rise, (b - a) // 3)
+    lo = a - 1 if swing.leaves is not None else a
+    hi = b if swing.lands is not None else b - 1
+    warp = lo + (hi - lo) * np.clip((t - lo - hold) / max(hi - lo - 2 * hold, 1), 0.0, 1.0)
+    path = np.stack([np.interp(warp, np.arange(len(free)), free[:, k]) for k in range(3)], axis=1)
+    s = smoothstep(np.clip((warp - lo) / max(hi - lo, 1), 0.0, 1.0))
+    return path + (1.0 - s)[:, None] * offsets[0] + s[:, None] * offsets[1]
+
+
+def _frames_from_plants(swing: _Swing, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Frames since the plant left and until the plant landed on (`n`, farther than any, where
+    there is none)."""
+    t = np.arange(swing.start, swing.end)
+    since = t - swing.start + 1 if swing.leaves is not None else np.full(len(t), n)
+    until = swing.end - t if swing.lands is not None else np.full(len(t), n)
+    return since, until
+
+
+def _eased_closeness(since: np.ndarray, until: np.ndarray, frames: int) -> np.ndarray:
+    """0 at a plant, easing to 1 once the nearer plant is `frames` away."""
+    return smoothstep(np.clip(np.minimum(since, until) / frames, 0.0, 1.0))
+
+
+def _nearest_plant_frame(swing: _Swing, since: np.ndarray, until: np.ndarray) -> np.ndarray:
+    """Per swing frame, the frame of the nearer plant (its last or its first planted frame)."""
+    if swing.leaves is not None and swing.lands is not None:
+        return np.where(since <= until, swing.start - 1, swing.end)
+    return np.full(len(since), swing.start - 1 if swing.leaves is not None else swing.end)
+
+
+def _ease_to_plants(
+    flat: Rotation,
+    swinging: Rotation,
+    swing: _Swing,
+    nearest: np.ndarray,
+    weight: np.ndarray,
+) -> Rotation:
+    """`flat` with the swing's frames set to the swinging orientation, eased by `weight` toward
+    the flat orientation of the nearest plant."""
+    frames = slice(swing.start, swing.end)
+    flat_near = flat[np.clip(nearest, 0, len(flat) - 1)]
+    delta = (swinging[frames].inv() * flat_near).as_rotvec()
+    blended = swinging[frames] * Rotation.from_rotvec(delta * weight[:, None])
+    return _assign(flat, frames, blended)
 
 
 def _split_drifting_plants(

@@ -17,6 +17,7 @@ from rd_pipeline.retarget.limits import FrameStepLimit
 from rd_pipeline.retarget.smoothing import smoothstep
 from rd_pipeline.retarget.targets import RetargetTargets
 from rd_pipeline.robots import Robot
+from rd_pipeline.robots.config import RobotConfig
 from rd_pipeline.robots.hulls import BodyHulls
 from rd_pipeline.robots.model import collision_geom_pairs, collision_geoms
 
@@ -36,67 +37,19 @@ class RetargetIk:
         self.targets = targets
         self.settings = settings
         model = robot.model
-        self.configuration = mink.Configuration(model)
         config = robot.config
-        oriented = set(targets.orientations)
-        feet = set(config.foot_bodies)
-        self.frame_tasks: list[mink.FrameTask] = []
-        for body in targets.bodies:
-            if body == config.root_body:
-                orientation_cost = weights.root_orientation
-            elif body in feet:
-                orientation_cost = weights.feet_orientation
-            elif body in oriented:
-                orientation_cost = weights.torso_orientation
-            else:
-                orientation_cost = 0.0
-            self.frame_tasks.append(
-                mink.FrameTask(
-                    body,
-                    "body",
-                    position_cost=1.0,
-                    orientation_cost=orientation_cost,
-                    lm_damping=settings.lm_damping,
-                )
-            )
+        self.configuration = mink.Configuration(model)
+        self.frame_tasks = _frame_tasks(targets, config, weights, settings.lm_damping)
         self.position_costs = _position_cost_schedule(targets, config, weights)
         self.applied_costs: np.ndarray | None = None
-        self.posture = mink.PostureTask(model, cost=weights.posture)
-        q_default = self.configuration.q.copy()
-        q_default[robot.qpos_indices] = config.default_pos
-        self.posture.set_target(q_default)
-        frame_period = 1.0 / targets.fps
-        self.step_limit = FrameStepLimit(
-            robot.dof_indices,
-            robot.joint_range[:, 0],
-            robot.joint_range[:, 1],
-            robot.qpos_indices,
-            model.nv,
-            config.velocity_limit * frame_period * settings.velocity_margin,
-        )
+        self.posture = _posture_task(robot, self.configuration, weights.posture)
+        self.step_limit = _frame_step_limit(robot, targets.fps, settings.velocity_margin)
         self.root_steps = _root_step_budget(targets, config.root_body, settings)
         self.floor = FloorLimit(model, hulls, settings.floor_clearance_m, settings.floor_detection_m)
-        # A swinging foot keeps part of its target's lift as a hard clearance: skimming the floor
-        # with a pointed toe reads as dragging, whatever the foot's position error.
-        self.floor_raise = np.zeros((targets.n_frames, len(hulls.body_names)))
-        feet_columns = [hulls.body_names.index(b) for b in config.foot_bodies]
-        self.floor_raise[:, feet_columns] = settings.swing_floor_fraction * targets.foot_lift
-        pairs = [
-            (collision_geoms(model, robot.body_ids[a]), collision_geoms(model, robot.body_ids[b]))
-            for a, b in config.collision_pairs
-        ]
+        self.floor_raise = _swing_floor_raise(targets, hulls, config.foot_bodies, settings.swing_floor_fraction)
         self.collision_pairs = collision_geom_pairs(robot)
         self.pair_reach = model.geom_rbound[self.collision_pairs].sum(axis=1)
-        self.limits: list[mink.Limit] = [self.step_limit, self.floor]
-        if pairs:
-            self.limits.append(
-                mink.CollisionAvoidanceLimit(
-                    model,
-                    pairs,
-                    minimum_distance_from_collisions=settings.collision_margin_m,
-                    collision_detection_distance=settings.collision_detection_m,
-                )
-            )
+        self.limits = _limits(robot, self.step_limit, self.floor, settings)
         self.tasks = [*self.frame_tasks, self.posture]
         self.damping = weights.damping
         self.key_body_ids = np.array([robot.body_ids[b] for b in targets.bodies])
@@ -291,6 +244,97 @@ class RetargetIk:
         return errors
 
 
+def _frame_tasks(
+    targets: RetargetTargets,
+    config: RobotConfig,
+    weights: IkWeights,
+    lm_damping: float,
+) -> list[mink.FrameTask]:
+    """One frame task per key body, in `targets.bodies` order; bodies without an orientation
+    target get no orientation cost."""
+    oriented = set(targets.orientations)
+    feet = set(config.foot_bodies)
+    tasks: list[mink.FrameTask] = []
+    for body in targets.bodies:
+        if body == config.root_body:
+            orientation_cost = weights.root_orientation
+        elif body in feet:
+            orientation_cost = weights.feet_orientation
+        elif body in oriented:
+            orientation_cost = weights.torso_orientation
+        else:
+            orientation_cost = 0.0
+        tasks.append(
+            mink.FrameTask(
+                body,
+                "body",
+                position_cost=1.0,
+                orientation_cost=orientation_cost,
+                lm_damping=lm_damping,
+            )
+        )
+    return tasks
+
+
+def _posture_task(robot: Robot, configuration: mink.Configuration, cost: float) -> mink.PostureTask:
+    """Pulls every joint toward the robot's default pose."""
+    posture = mink.PostureTask(robot.model, cost=cost)
+    q_default = configuration.q.copy()
+    q_default[robot.qpos_indices] = robot.config.default_pos
+    posture.set_target(q_default)
+    return posture
+
+
+def _frame_step_limit(robot: Robot, fps: float, velocity_margin: float) -> FrameStepLimit:
+    """Joint ranges, and a step per frame within (a margin of) each joint's velocity limit."""
+    frame_period = 1.0 / fps
+    return FrameStepLimit(
+        robot.dof_indices,
+        robot.joint_range[:, 0],
+        robot.joint_range[:, 1],
+        robot.qpos_indices,
+        robot.model.nv,
+        robot.config.velocity_limit * frame_period * velocity_margin,
+    )
+
+
+def _swing_floor_raise(
+    targets: RetargetTargets,
+    hulls: BodyHulls,
+    foot_bodies: tuple[str, str],
+    fraction: float,
+) -> np.ndarray:
+    """(T, bodies of `hulls`) extra floor clearance per frame: a fraction of each foot target's lift.
+
+    A swinging foot keeps part of its target's lift as a hard clearance: skimming the floor
+    with a pointed toe reads as dragging, whatever the foot's position error.
+    """
+    raise_m = np.zeros((targets.n_frames, len(hulls.body_names)))
+    feet_columns = [hulls.body_names.index(b) for b in foot_bodies]
+    raise_m[:, feet_columns] = fraction * targets.foot_lift
+    return raise_m
+
+
+def _limits(robot: Robot, step_limit: FrameStepLimit, floor: FloorLimit, settings: IkConfig) -> list[mink.Limit]:
+    """The frame step and the floor, and collision avoidance between the config's body pairs."""
+    model = robot.model
+    pairs = [
+        (collision_geoms(model, robot.body_ids[a]), collision_geoms(model, robot.body_ids[b]))
+        for a, b in robot.config.collision_pairs
+    ]
+    limits: list[mink.Limit] = [step_limit, floor]
+    if pairs:
+        limits.append(
+            mink.CollisionAvoidanceLimit(
+                model,
+                pairs,
+                minimum_distance_from_collisions=settings.collision_margin_m,
+                collision_detection_distance=settings.collision_detection_m,
+            )
+        )
+    return limits
+
+
 def _root_step_budget(targets: RetargetTargets, root_body: str, settings: IkConfig) -> np.ndarray:
     """(T, 6) how far the floating base may move in each frame, per tangent axis (world linear,
     body angular): a multiple of its own target's fastest motion nearby plus a minimum, so the root
@@ -312,7 +356,7 @@ def _root_step_budget(targets: RetargetTargets, root_body: str, settings: IkConf
     return steps
 
 
-def _position_cost_schedule(targets: RetargetTargets, config, weights: IkWeights) -> np.ndarray:
+def _position_cost_schedule(targets: RetargetTargets, config: RobotConfig, weights: IkWeights) -> np.ndarray:
     """(T, K, 3) position cost of each key body per frame, along its own axes.
 
     Planted feet must not slide; swinging feet only guide the leg sideways, so the body follows the

@@ -238,13 +238,13 @@ def colliding_frames(robot: Robot, qpos: np.ndarray, depth_m: float) -> np.ndarr
     gap = np.linalg.norm(centres[:, columns[:, 0]] - centres[:, columns[:, 1]], axis=-1)
     candidate = gap < radius[columns[:, 0]] + radius[columns[:, 1]] + margin
 
-    for t in np.flatnonzero(candidate.any(axis=1)):
-        data.qpos[:] = qpos[t]
+    for frame in np.flatnonzero(candidate.any(axis=1)):
+        data.qpos[:] = qpos[frame]
         mujoco.mj_kinematics(model, data)
-        for g1, g2 in geom_pairs[candidate[t]]:
+        for g1, g2 in geom_pairs[candidate[frame]]:
             # distmax = the clearance asked for: pairs farther apart stop early.
             if mujoco.mj_geomDistance(model, data, int(g1), int(g2), margin, None) < -depth_m:
-                colliding[t] = True
+                colliding[frame] = True
                 break
     return colliding
 

@@ -110,6 +110,30 @@ def robot_rest_rotation(robot: Robot, body: str) -> np.ndarray:
     return data.xmat[robot.body_ids[body]].reshape(3, 3).copy()
 
 
+@dataclass(frozen=True)
+class _Clip:
+    """The resampled human and the robot it is mapped onto: what the shaping steps read."""
+
+    pos: np.ndarray
+    """(T, J, 3) human joint positions at the output rate (smoothed)."""
+    rot: np.ndarray
+    """(T, J, 3, 3) human joint rotations at the output rate."""
+    index: dict[str, int]
+    """Human joint -> its index in `pos` and `rot`."""
+    fps: float
+    robot: Robot
+    body_for: dict[str, str]
+    """Human joint -> the robot body that follows it."""
+    rest: dict[str, np.ndarray]
+    """Human joint -> (3,) its robot body's position in the rest pose."""
+    root_scale: float
+    """Human-to-robot scale of the root path (the leg-length ratio)."""
+
+    def human(self, joint: str) -> np.ndarray:
+        """(T, 3) the human joint's path."""
+        return self.pos[:, self.index[joint]]
+
+
 def build_targets(
     human: HumanMotion,
     robot: Robot,
@@ -119,16 +143,11 @@ def build_targets(
     shape: TargetShaping = TargetShaping(),
     body_contact: BodyContactConfig = BodyContactConfig(),
 ) -> RetargetTargets:
+    """The robot's key-body targets at `fps`: the human limb chain at the robot's proportions,
+    legs kept apart and reachable, feet planted on their soles (`foot_vertices`, left and right)
+    and bodies resting on the floor held there."""
     config = robot.config
-    sole_height = np.array([-vertices[:, 2].min() for vertices in foot_vertices])
-    body_for = {human_joint: body for body, human_joint in config.retarget_map.items()}
-    for needed in (PELVIS, TORSO, *FEET, *HIPS_LR, *SHOULDERS_LR):
-        if needed not in body_for:
-            raise PipelineError(f"{config.source}: bodies.retarget must map a body to LAFAN1 joint '{needed}'")
-    missing = [j for j in config.retarget_map.values() if j not in human.names]
-    if missing:
-        raise PipelineError(f"{config.source}: bodies.retarget names human joint '{missing[0]}', not in the skeleton")
-
+    body_for = _body_for_joint(robot, human)
     human_pos, human_rot, names = resample_human(human, fps)
     if shape.smoothing_s > 0:
         human_pos = gaussian_filter1d(human_pos, shape.smoothing_s * fps, axis=0, mode="nearest")
@@ -136,20 +155,71 @@ def build_targets(
     joints = list(config.retarget_map.values())
     bodies = list(config.retarget_map.keys())
     rest = dict(zip(joints, robot_rest_positions(robot, bodies)))
-
-    # Keypoints on the same rigid part as their parent (hips on the pelvis, torso and shoulders on
-    # the torso) keep the robot's own offset, turned by the parent's target orientation; limbs
-    # (knees, feet, elbows, hands) follow the human direction with the robot's segment length.
-    parent_of = {joint: _mapped_ancestor(human, joint, set(joints)) for joint in joints}
-    leg_human = sum(
-        _median_length(human_pos, index, a, b) for a, b in (("LeftUpLeg", "LeftLeg"), ("LeftLeg", "LeftFoot"))
-    )
-    leg_robot = sum(np.linalg.norm(rest[a] - rest[b]) for a, b in (("LeftUpLeg", "LeftLeg"), ("LeftLeg", "LeftFoot")))
-    root_scale = float(leg_robot / leg_human)
+    root_scale = _root_scale(human_pos, index, rest)
+    clip = _Clip(human_pos, human_rot, index, fps, robot, body_for, rest, root_scale)
     orientations = _orientations(human_pos, index, robot, body_for, rest)
-    rigid_frame = {PELVIS: orientations[body_for[PELVIS]], TORSO: orientations[body_for[TORSO]]}
-    rest_rotation = {joint: robot_rest_rotation(robot, body_for[joint]) for joint in rigid_frame}
-    targets: dict[str, np.ndarray] = {PELVIS: human_pos[:, index[PELVIS]] * root_scale}
+    targets = _limb_chain(clip, human, joints, orientations)
+    _spread_feet(targets, rest, orientations[body_for[PELVIS]], fps, shape)
+    foot_contact = _human_contacts(human_pos, index, fps, contact)
+    _stand_on_soles(targets, foot_contact, foot_vertices)
+    foot_lift = _plant_feet(clip, targets, orientations, foot_contact, foot_vertices, shape)
+    keep_legs_reachable(targets, rest, fps, shape.reach_fraction, shape.leg_correction_smoothing_s)
+    resting = label_body_contacts(human_pos, index, joints, fps, body_contact)
+    _hold_resting_bodies(targets, joints, resting, fps, body_contact.release_s)
+    return RetargetTargets(
+        fps=fps,
+        bodies=tuple(bodies),
+        human_joints=tuple(joints),
+        positions=np.stack([targets[j] for j in joints], axis=1),
+        orientations=orientations,
+        foot_contact=foot_contact,
+        foot_lift=foot_lift,
+        swing_clearance_m=shape.swing_clearance_m,
+        body_contact=resting,
+        human_scale=root_scale,
+        human_pelvis=human_pos[:, index[PELVIS]] * root_scale,
+    )
+
+
+def _body_for_joint(robot: Robot, human: HumanMotion) -> dict[str, str]:
+    """Human joint -> robot body, from the robot's retarget map, checked against what the
+    targets need and what the skeleton has."""
+    config = robot.config
+    body_for = {human_joint: body for body, human_joint in config.retarget_map.items()}
+    for needed in (PELVIS, TORSO, *FEET, *HIPS_LR, *SHOULDERS_LR):
+        if needed not in body_for:
+            raise PipelineError(f"{config.source}: bodies.retarget must map a body to LAFAN1 joint '{needed}'")
+    missing = [j for j in config.retarget_map.values() if j not in human.names]
+    if missing:
+        raise PipelineError(f"{config.source}: bodies.retarget names human joint '{missing[0]}', not in the skeleton")
+    return body_for
+
+
+def _root_scale(pos: np.ndarray, index: dict[str, int], rest: dict[str, np.ndarray]) -> float:
+    """Robot over human leg length (hip to knee to ankle, left side): the scale of the root path."""
+    leg = (("LeftUpLeg", "LeftLeg"), ("LeftLeg", "LeftFoot"))
+    leg_human = sum(_median_length(pos, index, a, b) for a, b in leg)
+    leg_robot = sum(np.linalg.norm(rest[a] - rest[b]) for a, b in leg)
+    return float(leg_robot / leg_human)
+
+
+def _limb_chain(
+    clip: _Clip,
+    human: HumanMotion,
+    joints: list[str],
+    orientations: dict[str, np.ndarray],
+) -> dict[str, np.ndarray]:
+    """Human joint -> (T, 3) target, down the chain from the scaled pelvis.
+
+    Keypoints on the same rigid part as their parent (hips on the pelvis, torso and shoulders on
+    the torso) keep the robot's own offset, turned by the parent's target orientation; limbs
+    (knees, feet, elbows, hands) follow the human direction with the robot's segment length.
+    """
+    rest = clip.rest
+    parent_of = {joint: _mapped_ancestor(human, joint, set(joints)) for joint in joints}
+    rigid_frame = {PELVIS: orientations[clip.body_for[PELVIS]], TORSO: orientations[clip.body_for[TORSO]]}
+    rest_rotation = {joint: robot_rest_rotation(clip.robot, clip.body_for[joint]) for joint in rigid_frame}
+    targets: dict[str, np.ndarray] = {PELVIS: clip.human(PELVIS) * clip.root_scale}
     for joint in _topological(parent_of):
         parent = parent_of[joint]
         if parent is None:
@@ -158,70 +228,93 @@ def build_targets(
             offset_in_parent = rest_rotation[parent].T @ (rest[joint] - rest[parent])
             targets[joint] = targets[parent] + rigid_frame[parent] @ offset_in_parent
         else:
-            segment = human_pos[:, index[joint]] - human_pos[:, index[parent]]
-            scale = np.linalg.norm(rest[joint] - rest[parent]) / _median_length(human_pos, index, joint, parent)
+            segment = clip.human(joint) - clip.human(parent)
+            scale = np.linalg.norm(rest[joint] - rest[parent]) / _median_length(clip.pos, clip.index, joint, parent)
             targets[joint] = targets[parent] + scale * segment
+    return targets
 
-    match_stance_width(targets, rest, rigid_frame[PELVIS])
+
+def _spread_feet(
+    targets: dict[str, np.ndarray],
+    rest: dict[str, np.ndarray],
+    pelvis_frame: np.ndarray,
+    fps: float,
+    shape: TargetShaping,
+) -> None:
+    """The robot's stance width, and feet never closer than its fraction of it (in place)."""
+    match_stance_width(targets, rest, pelvis_frame)
     keep_feet_apart(
         targets,
         rest,
-        rigid_frame[PELVIS],
+        pelvis_frame,
         fps,
         shape.min_stance_fraction,
         shape.leg_correction_smoothing_s,
         shape.feet_line_smoothing_s,
     )
-    contact = _human_contacts(human_pos, index, fps, contact)
-    # Lift or lower everything so planted feet sit at the robot's sole height (robot and human
-    # ankles are not at the same height in proportion to the legs).
+
+
+def _stand_on_soles(
+    targets: dict[str, np.ndarray],
+    foot_contact: np.ndarray,
+    foot_vertices: tuple[np.ndarray, np.ndarray],
+) -> None:
+    """Lift or lower every target (in place) so planted feet sit at the robot's sole height:
+    robot and human ankles are not at the same height in proportion to the legs."""
+    sole_height = np.array([-vertices[:, 2].min() for vertices in foot_vertices])
     foot_z = np.stack([targets[f][:, 2] for f in FEET], axis=1)
-    planted = foot_z[contact] if contact.any() else foot_z.min(axis=1)
+    planted = foot_z[foot_contact] if foot_contact.any() else foot_z.min(axis=1)
     shift = float(np.median(sole_height)) - float(np.median(planted))
     for joint in targets:
         targets[joint] = targets[joint] + np.array([0.0, 0.0, shift])
 
-    pelvis_yaw = np.unwrap(yaw_and_pitch(orientations[body_for[PELVIS]][:, :, 0])[0])
-    foot_lift = np.zeros((human_pos.shape[0], 2))
+
+def _plant_feet(
+    clip: _Clip,
+    targets: dict[str, np.ndarray],
+    orientations: dict[str, np.ndarray],
+    foot_contact: np.ndarray,
+    foot_vertices: tuple[np.ndarray, np.ndarray],
+    shape: TargetShaping,
+) -> np.ndarray:
+    """Both feet through `plant_foot`: their targets, orientations and (T, 2) contact labels are
+    replaced in place. Returns the (T, 2) height each sole target clears the floor by."""
+    pelvis_yaw = np.unwrap(yaw_and_pitch(orientations[clip.body_for[PELVIS]][:, :, 0])[0])
+    foot_lift = np.zeros((clip.pos.shape[0], 2))
     for side, (foot, toe) in enumerate(zip(FEET, TOES)):
-        forward = human_pos[:, index[toe]] - human_pos[:, index[foot]]
-        position, rotation, foot_lift[:, side], contact[:, side] = plant_foot(
+        forward = clip.human(toe) - clip.human(foot)
+        position, rotation, foot_lift[:, side], foot_contact[:, side] = plant_foot(
             targets[foot],
             forward,
-            human_rot[:, index[foot]],
-            contact[:, side],
+            clip.rot[:, clip.index[foot]],
+            foot_contact[:, side],
             foot_vertices[side],
-            fps,
+            clip.fps,
             shape.swing_clearance_m,
             shape.swing_lift_time_s,
             pelvis_yaw,
-            leg_yaw_range(robot, body_for[foot]),
+            leg_yaw_range(clip.robot, clip.body_for[foot]),
             shape.planted_tilt_rad,
             shape.plant_drift,
-            0.5 * (human_pos[:, index[foot]] + human_pos[:, index[toe]]) * root_scale,
+            0.5 * (clip.human(foot) + clip.human(toe)) * clip.root_scale,
         )
         targets[foot] = position
-        offset = robot_rest_rotation(robot, body_for[foot])
-        orientations[body_for[foot]] = rotation @ offset
+        offset = robot_rest_rotation(clip.robot, clip.body_for[foot])
+        orientations[clip.body_for[foot]] = rotation @ offset
+    return foot_lift
 
-    keep_legs_reachable(targets, rest, fps, shape.reach_fraction, shape.leg_correction_smoothing_s)
-    resting = label_body_contacts(human_pos, index, joints, fps, body_contact)
+
+def _hold_resting_bodies(
+    targets: dict[str, np.ndarray],
+    joints: list[str],
+    resting: np.ndarray,
+    fps: float,
+    release_s: float,
+) -> None:
+    """Hold the target of each key body (in place) while it rests on the floor."""
     for k, joint in enumerate(joints):
         if resting[:, k].any():
-            targets[joint] = hold_in_contact(targets[joint], resting[:, k], fps, body_contact.release_s)
-    return RetargetTargets(
-        fps=fps,
-        bodies=tuple(bodies),
-        human_joints=tuple(joints),
-        positions=np.stack([targets[j] for j in joints], axis=1),
-        orientations=orientations,
-        foot_contact=contact,
-        foot_lift=foot_lift,
-        swing_clearance_m=shape.swing_clearance_m,
-        body_contact=resting,
-        human_scale=root_scale,
-        human_pelvis=human_pos[:, index[PELVIS]] * root_scale,
-    )
+            targets[joint] = hold_in_contact(targets[joint], resting[:, k], fps, release_s)
 
 
 def _mapped_ancestor(human: HumanMotion, joint: str, mapped: set[str]) -> str | None:

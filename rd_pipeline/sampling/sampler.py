@@ -10,11 +10,14 @@ uncapped segments in proportion to their weight, until no segment exceeds the ca
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal, get_args
+from typing import TYPE_CHECKING, Literal, get_args
 
 from rd_pipeline.lazy import lazy_import
 
-torch = lazy_import("torch")
+if TYPE_CHECKING:
+    import torch
+else:
+    torch = lazy_import("torch")
 
 
 SamplerMode = Literal["uniform", "distribution", "failure", "combined"]

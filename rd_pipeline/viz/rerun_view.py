@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import mujoco
@@ -62,7 +63,7 @@ def log_human(rec: rr.RecordingStream, human: HumanMotion, entity: str = "human"
 def log_robot_meshes(
     rec: rr.RecordingStream,
     model: mujoco.MjModel,
-    body_names: list[str],
+    body_names: Sequence[str],
     body_pos_w: np.ndarray,
     body_quat_w: np.ndarray,
     fps: float,
