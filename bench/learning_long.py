@@ -27,7 +27,7 @@ from rd_pipeline.api.workspace import training_runs, training_seconds
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.report import REPORT_MD, SURVIVAL_PLOT
-from rd_pipeline.evaluation.validation import ValidationReport
+from rd_pipeline.evaluation.validation_report import ValidationReport
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.rl.training_log import read_training_log
 from rd_pipeline.stages.train import CURVE_FILE, PROFILE_FILE

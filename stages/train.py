@@ -40,10 +40,9 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     # Checkpoints and the log live in the work folder, which survives an interruption.
     work = ctx.work_dir or ctx.out_dir
     shorter = _longest_shorter_run(ctx.shorter, config.iterations) if ctx.resume else None
-    first = runner.prepare(
-        work, ctx.resume, shorter, lambda line: ctx.console.print(line, markup=False, highlight=False)
-    )
-    with ctx.progress(config.iterations - first, f"PPO {ctx.robot}") as advance:
+    say = lambda line: ctx.console.print(line, markup=False, highlight=False)
+    first = runner.prepare(work, ctx.restart, shorter, say)
+    with ctx.progress(config.iterations, f"PPO {ctx.robot}", done=first) as advance:
         rows = runner.learn(
             work,
             first,

@@ -249,3 +249,23 @@ def test_an_unwritable_store_is_one_line_naming_it(store: str, tmp_path: Path) -
         assert last.startswith(f"error: cannot write the artifact store {store} (")
         assert last.endswith("); set RD_ARTIFACTS to a writable folder")
         assert "Traceback" not in result.stderr
+
+
+def test_a_cached_run_checks_the_hashes_it_reports_and_status_fails_on_damage(artifacts: Path) -> None:
+    until_import = ("run", "--robot", "h1_2", "--motion", "dance2_subject4", "--until", "import")
+    assert cli(*until_import).returncode == 0
+    (folder,) = list((artifacts / "import" / "h1_2" / "dance2_subject4").iterdir())
+    reference = folder / "reference.npz"
+    data = bytearray(reference.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    reference.write_bytes(bytes(data))
+    status = ("status", "--robot", "h1_2", "--motion", "dance2_subject4")
+    assert cli(*status).returncode == 0  # sizes only: the flipped byte is not seen
+    verified = cli(*status, "--verify")
+    assert verified.returncode == 1 and "damaged" in verified.stdout
+    assert cli(*status, "--verify", "--json").returncode == 1
+    rerun = cli(*until_import)  # every stage cached: the one it would report is hashed, found, recomputed
+    assert rerun.returncode == 0, rerun.stderr
+    assert f"damaged {folder}: reference.npz does not match its sha256" in " ".join(rerun.stderr.split())
+    assert "run    import" in rerun.stderr
+    assert cli(*status, "--verify").returncode == 0

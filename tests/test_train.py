@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -139,7 +140,7 @@ def test_smoke_profile_runs_the_dag_to_export(robot: str, motion: str, artifacts
 
 
 @pytest.mark.slow
-def test_cli_resume_continues_an_interrupted_training(artifacts: Path) -> None:
+def test_an_interrupted_training_is_continued_by_the_same_command(artifacts: Path) -> None:
     import os
     import signal
     import subprocess
@@ -167,7 +168,8 @@ def test_cli_resume_continues_an_interrupted_training(artifacts: Path) -> None:
         cwd=PROJECT,
         env=os.environ.copy(),
         stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     folder = artifacts / "train" / "h1_2" / "dance2_subject4"
@@ -175,13 +177,23 @@ def test_cli_resume_continues_an_interrupted_training(artifacts: Path) -> None:
     while not list(folder.glob(".work-*/checkpoints/model_3.pt")) and time.time() < deadline:
         time.sleep(0.05)
     process.send_signal(signal.SIGINT)
-    assert process.wait(timeout=120) == 130
+    _, said = process.communicate(timeout=120)
+    assert process.returncode == 130
     (work,) = folder.glob(".work-*")
+    assert said.strip().splitlines()[-1] == (
+        f"interrupted: no partial artifact was kept; train kept its progress in {work}; "
+        "the same command continues from it (--force starts over)"
+    )
     saved = max(int(p.stem.split("_")[1]) for p in (work / "checkpoints").glob("model_*.pt"))
     assert 3 <= saved < 30 and not [p for p in folder.iterdir() if not p.name.startswith(".")]
-    result = cli(*args, "--resume")
+    status = json.loads(cli("status", *args[1:5], "--profile", "smoke", "--set", *args[-2:], "--json").stdout)
+    (train,) = [row for row in status["pipelines"][0]["stages"] if row["stage"] == "train"]
+    assert train["state"] == "resumable" and str(work) in train["reason"]
+    result = cli(*args)  # no --resume: the kept checkpoints are continued, not thrown away
     assert result.returncode == 0, result.stderr
-    assert f"resuming from model_{saved}.pt" in result.stderr
+    assert f"continuing the interrupted run from model_{saved}.pt" in result.stderr
+    counts = [int(n) for n in re.findall(r"PPO h1_2: (\d+)/30", result.stderr)]
+    assert counts and min(counts) > saved  # the progress counts on from the checkpoint
     (done,) = [p for p in folder.iterdir() if not p.name.startswith(".")]
     logged = [row["iteration"] for row in read_training_log(done)]
     assert logged == list(range(1, 31))  # iterations logged after the last checkpoint are not repeated

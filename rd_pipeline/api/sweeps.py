@@ -23,7 +23,7 @@ from pathlib import Path
 from rd_pipeline import paths
 from rd_pipeline.api import workspace
 from rd_pipeline.artifacts.keys import artifact_key
-from rd_pipeline.evaluation.validation import ValidationReport
+from rd_pipeline.evaluation.validation_report import ValidationReport
 
 EXECUTORS = ("local", "ray")
 SHARED_UNTIL = "prior"

@@ -18,7 +18,7 @@ from rd_pipeline import __version__, paths
 from rd_pipeline.artifacts.keys import artifact_key, canonical_json
 from rd_pipeline.artifacts.stage import Stage, StageContext, build_params
 from rd_pipeline.artifacts.store import ArtifactRef, ArtifactStore, file_records, write_manifest
-from rd_pipeline.errors import PipelineError
+from rd_pipeline.errors import Interrupted, PipelineError
 from rd_pipeline.files import file_sha256
 
 SOURCES = ("bvh", "csv")
@@ -196,7 +196,7 @@ def execute(
                 existing = _made_meanwhile(store, entry, robot, pipeline.motion, force)
                 if existing is None:
                     console.print(f"[cyan]run[/]    {stage.name:<9} {escape(label)}  {entry.key}")
-                    ref = _run_stage(pipeline, store, entry, refs, console, resume=resume)
+                    ref = _run_stage(pipeline, store, entry, refs, console, resume=resume, restart=force)
                     seconds = time.perf_counter() - began
                     console.print(
                         f"[green]done[/]   {stage.name:<9} {escape(label)}  {entry.key}  ({seconds:.2f} s) -> {escape(str(ref.path))}"
@@ -221,15 +221,16 @@ def _usable_artifacts(
 ) -> dict[str, ArtifactRef]:
     """Stage name -> its artifact when it exists and is whole.
 
-    Sizes are checked for every artifact; the sha256 of every file is checked for the artifacts a
-    stage of this run will load (those upstream of a stage that runs), and a damaged one is
-    reported and left out, so it is recomputed.
+    The sha256 of every file is checked for the artifacts this run reports as cached (the selected
+    stages) and for those a stage of this run will load (upstream of a stage that runs); sizes only
+    for the rest. A damaged one is reported and left out, so it is recomputed.
     """
     found: dict[str, ArtifactRef] = {}
     for entry in planned:
         robot = pipeline.robot if entry.stage.per_robot else None
         ref = store.find(entry.stage.name, robot, pipeline.motion, entry.key)
-        if ref is not None and not (force and entry.stage in selected) and _whole(ref, False, console):
+        reported = entry.stage in selected
+        if ref is not None and not (force and reported) and _whole(ref, reported, console):
             found[entry.stage.name] = ref
     for entry in reversed(planned):  # a stage recomputed after all loads its own upstream in turn
         name = entry.stage.name
@@ -266,6 +267,7 @@ def _run_stage(
     refs: dict[str, ArtifactRef],
     console: Console,
     resume: bool,
+    restart: bool,
 ) -> ArtifactRef:
     stage = entry.stage
     robot = pipeline.robot if stage.per_robot else None
@@ -281,11 +283,15 @@ def _run_stage(
             upstream={role: refs[role] for role in stage.requires},
             out_dir=out,
             console=console,
-            work_dir=store.folder(stage.name, robot, pipeline.motion) / f".work-{entry.key}",
+            work_dir=store.work_folder(stage.name, robot, pipeline.motion, entry.key),
             resume=resume,
+            restart=restart,
             shorter=_shorter_runs(store, entry, robot, pipeline.motion) if resume else (),
         )
-        metrics = stage.run(context)
+        try:
+            metrics = stage.run(context)
+        except KeyboardInterrupt:
+            raise _interrupted(context, stage.name) from None
         write_manifest(
             out,
             {
@@ -304,6 +310,14 @@ def _run_stage(
             },
         )
     return ArtifactRef(stage.name, entry.key, store.folder(stage.name, robot, pipeline.motion) / entry.key)
+
+
+def _interrupted(context: StageContext, stage: str) -> KeyboardInterrupt:
+    """Ctrl-C in a stage: say where its kept progress is, if it kept any."""
+    work = context.work_dir
+    if work is None or not work.is_dir() or not any(work.iterdir()):
+        return KeyboardInterrupt()
+    return Interrupted(f"{stage} kept its progress in {work}; the same command continues from it (--force starts over)")
 
 
 def _shorter_runs(store: ArtifactStore, entry: PlannedStage, robot: str | None, motion: str) -> tuple[ArtifactRef, ...]:
@@ -351,8 +365,8 @@ def code_version() -> str:
 
 
 def stage_status(pipeline: Pipeline, store: ArtifactStore, verify: bool = False) -> list[dict[str, Any]]:
-    """Per stage of the chain: key, path and state (cached / damaged / stale / missing), or the reason
-    there is no key. File sizes are always checked, their sha256 with `verify`."""
+    """Per stage of the chain: key, path and state (cached / damaged / resumable / stale / missing),
+    or the reason there is no key. File sizes are always checked, their sha256 with `verify`."""
     rows = []
     chain = pipeline.chain()
     for i, stage in enumerate(chain):
@@ -366,9 +380,15 @@ def stage_status(pipeline: Pipeline, store: ArtifactStore, verify: bool = False)
         found = store.find(stage.name, robot, pipeline.motion, entry.key)
         damage = found.damage(verify) if found else None
         others = [k for k in store.keys(stage.name, robot, pipeline.motion) if k != entry.key]
-        state = "damaged" if damage else "cached" if found else "stale" if others else "missing"
+        work = store.work_folder(stage.name, robot, pipeline.motion, entry.key)
+        kept = not found and work.is_dir() and any(work.iterdir())
+        state = (
+            "damaged" if damage else "cached" if found else "resumable" if kept else "stale" if others else "missing"
+        )
         path = store.folder(stage.name, robot, pipeline.motion) / entry.key
         rows.append({**row, "key": entry.key, "path": str(path), "state": state, "other_keys": others})
         if damage:
             rows[-1]["reason"] = damage
+        if kept:
+            rows[-1]["reason"] = f"an interrupted run kept its progress in {work}; `run` continues from it"
     return rows

@@ -48,7 +48,9 @@ class StageContext:
     work_dir: Path | None = None
     """A folder that survives an interrupted run of this key (long stages keep checkpoints there)."""
     resume: bool = False
-    """Continue from what `work_dir` holds instead of starting over."""
+    """`--resume`: the stage may also grow a finished shorter run (`shorter`)."""
+    restart: bool = False
+    """`--force`: discard what `work_dir` holds and start over (by default a stage continues from it)."""
     shorter: tuple[ArtifactRef, ...] = ()
     """With `resume`: finished artifacts of this stage, version, inputs and upstream whose params
     differ from `params` only in the stage's `extends` fields; the stage decides which it can grow."""
@@ -68,13 +70,14 @@ class StageContext:
                 advance()
 
     @contextmanager
-    def progress(self, total: int, description: str) -> Iterator[Callable[..., None]]:
-        """A progress bar with ETA; the yielded `advance(status="...")` moves it and shows a status line.
+    def progress(self, total: int, description: str, done: int = 0) -> Iterator[Callable[..., None]]:
+        """A progress bar with ETA over `total` items of which `done` are finished (a continued
+        run); the yielded `advance(status="...")` moves it and shows a status line.
 
         Off a terminal (a log, a pipe) it prints a plain line at every tenth of the work instead.
         """
         if not self.console.is_terminal:
-            yield _plain_progress(self.console, total, description)
+            yield _plain_progress(self.console, total, description, done)
             return
         columns = (
             TextColumn("  {task.description}"),
@@ -85,7 +88,7 @@ class StageContext:
             TextColumn("{task.fields[status]}"),
         )
         with Progress(*columns, console=self.console, transient=True) as bar:
-            task = bar.add_task(description, total=total, status="")
+            task = bar.add_task(description, total=total, completed=done, status="")
 
             def advance(status: str = "") -> None:
                 bar.update(task, advance=1, status=status)
@@ -93,9 +96,8 @@ class StageContext:
             yield advance
 
 
-def _plain_progress(console: Console, total: int, description: str) -> Callable[..., None]:
+def _plain_progress(console: Console, total: int, description: str, done: int) -> Callable[..., None]:
     began = time.perf_counter()
-    done = 0
     step = max(1, total // 10)
 
     def advance(status: str = "") -> None:

@@ -25,6 +25,7 @@ from rd_pipeline.files import file_sha256
 MANIFEST = "manifest.json"
 TEMP_PREFIX = ".tmp-"
 LOCK_PREFIX = ".lock-"
+WORK_PREFIX = ".work-"
 
 
 @dataclass(frozen=True)
@@ -74,6 +75,10 @@ class ArtifactStore:
         """The folder holding every key of one stage for one (robot, motion)."""
         parts = [stage] + ([robot] if robot else []) + [motion]
         return self.root.joinpath(*parts)
+
+    def work_folder(self, stage: str, robot: str | None, motion: str, key: str) -> Path:
+        """Where a long stage keeps its progress for `key` (checkpoints) until it finishes."""
+        return self.folder(stage, robot, motion) / f"{WORK_PREFIX}{key}"
 
     def find(self, stage: str, robot: str | None, motion: str, key: str) -> ArtifactRef | None:
         path = self.folder(stage, robot, motion) / key

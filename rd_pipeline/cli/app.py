@@ -11,7 +11,6 @@ import tyro
 from rich.console import Console
 from rich.markup import escape
 
-from rd_pipeline.cli import commands
 from rd_pipeline.cli.args import (
     Ablate,
     ExportMotion,
@@ -25,7 +24,7 @@ from rd_pipeline.cli.args import (
     Sweep,
     View,
 )
-from rd_pipeline.errors import PipelineError
+from rd_pipeline.errors import Interrupted, PipelineError
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -54,6 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     except PipelineError as exc:
         console.print(f"[red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
         return 2
+    except Interrupted as exc:
+        console.print(f"[red]interrupted[/]: no partial artifact was kept; {escape(str(exc))}")
+        return 130
     except KeyboardInterrupt:
         console.print("[red]interrupted[/]: no partial artifact was kept")
         return 130
@@ -63,6 +65,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _dispatch(command: object, console: Console) -> int:
+    # Imported once the arguments are parsed: the API registers torch lazily in sys.modules, and tyro
+    # then loads all of it to offer torch.device parsing (seconds a cached run should not pay).
+    from rd_pipeline.cli import commands
+
     handlers: dict[type, Callable[[Any, Console], int]] = {
         Run: commands.run,
         Plan: commands.plan,

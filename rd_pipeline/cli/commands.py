@@ -141,18 +141,19 @@ def status(cmd: Status, console: Console) -> int:
                 "stages": workspace.status(planned, cmd.verify),
             }
         )
+    damaged = any(row["state"] == "damaged" for report in reports for row in report["stages"])
     if cmd.json:
         print(json.dumps({"artifacts": str(root), "pipelines": reports}, indent=2))
-        return 0
+        return 1 if damaged else 0
     if not reports:
         console.print(f"no artifacts in {escape(str(root))}")
     for report in reports:
         _print_status_table(report)
-    return 0
+    return 1 if damaged else 0
 
 
 def _print_status_table(report: dict) -> None:
-    colors = {"cached": "green", "damaged": "red", "stale": "yellow", "missing": "red"}
+    colors = {"cached": "green", "damaged": "red", "resumable": "yellow", "stale": "yellow", "missing": "red"}
     table = Table(title=escape(f"{report['robot'] or '(any robot)'}/{report['motion']} ({report['source']})"))
     for column in ("stage", "state", "key", "path"):
         table.add_column(column)

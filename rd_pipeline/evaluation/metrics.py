@@ -4,11 +4,12 @@ and the reduction of several seeds to a mean with a 95% Student-t interval."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import stats
 
-from rd_pipeline.evaluation.sim2sim import Rollout
+if TYPE_CHECKING:
+    from rd_pipeline.evaluation.sim2sim import Rollout
 
 ERROR_METRICS = ("E_g_mpbpe", "E_mpbpe", "E_mpjpe", "E_mpjve", "E_mpbve")
 SUCCESS_THRESHOLDS_S = (10, 20, 30)
@@ -75,6 +76,8 @@ def t_interval(values: Sequence[float | None]) -> dict[str, float | int | None]:
         return {"mean": None, "ci95": None, "n": 0}
     if len(array) == 1:
         return {"mean": round(float(array[0]), 3), "ci95": None, "n": 1}
+    from scipy import stats  # it probes torch on import; the CLI loads it only to reduce seeds
+
     half = stats.t.ppf(0.975, len(array) - 1) * array.std(ddof=1) / np.sqrt(len(array))
     return {"mean": round(float(array.mean()), 3), "ci95": round(float(half), 3), "n": len(array)}
 
@@ -89,6 +92,8 @@ def difference_interval(first: list[float], second: list[float]) -> dict[str, fl
     if a.std() == 0 and b.std() == 0:
         # No spread on either side: the interval is the difference itself (Welch's is undefined).
         return {"difference": round(difference, 3), "low": round(difference, 3), "high": round(difference, 3)}
+    from scipy import stats
+
     interval = stats.ttest_ind(a, b, equal_var=False).confidence_interval(0.95)
     return {
         "difference": round(difference, 3),

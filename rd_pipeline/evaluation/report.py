@@ -6,8 +6,8 @@ import json
 from pathlib import Path
 
 from rd_pipeline.evaluation.metrics import DRIFT_BINS, ERROR_METRICS, SUCCESS_THRESHOLDS_S
+from rd_pipeline.evaluation.validation_report import REPORT_JSON
 
-REPORT_JSON = "report.json"
 REPORT_MD = "report.md"
 DRIFT_PLOT = "drift.png"
 SURVIVAL_PLOT = "survival_per_start.png"

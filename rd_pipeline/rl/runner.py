@@ -96,13 +96,14 @@ class TrainingRunner:
     def observation_size(self) -> int:
         return int(self.env.get_observations()["policy"].shape[1])
 
-    def prepare(self, work: Path, resume: bool, shorter: ShorterRun | None, say: Callable[[str], None]) -> int:
-        """Make `work` ready and return the iteration to start from: the newest checkpoint there with
-        `resume`, else the end of `shorter` copied in (a longer run is the shorter one continued,
-        since nothing in training depends on the total), else 0 in an emptied folder."""
+    def prepare(self, work: Path, restart: bool, shorter: ShorterRun | None, say: Callable[[str], None]) -> int:
+        """Make `work` ready and return the iteration to start from: the newest checkpoint an
+        interrupted run left there (unless `restart`; resuming is exact, so the result is that of an
+        uninterrupted run), else the end of `shorter` copied in (a longer run is the shorter one
+        continued, since nothing in training depends on the total), else 0 in an emptied folder."""
         checkpoints = list(checkpoints_by_iteration(work).values())
-        if resume and checkpoints:
-            say(f"  resuming from {checkpoints[-1].name}")
+        if checkpoints and not restart:
+            say(f"  continuing the interrupted run from {checkpoints[-1].name} in {work} (--force starts over)")
             return load_checkpoint(checkpoints[-1], self.ppo, self.env)
         if work.exists():
             shutil.rmtree(work)
