@@ -130,7 +130,7 @@ def status(cmd: Status, console: Console) -> int:
         pairs: list[tuple[str | None, str]] = [(cmd.robot, cmd.motion)]
     else:
         pairs = workspace.pairs_in_store(root, cmd.robot, cmd.motion)
-    reports = []
+    reports: list[dict[str, Any]] = []
     for robot, motion in pairs:
         planned = workspace.plan(robot, motion, cmd.profile, cmd.params_file, cmd.set, source=cmd.source)
         reports.append(
