@@ -91,20 +91,22 @@ def parse_assignments(assignments: tuple[str, ...], stage_names: list[str]) -> d
 
 def layered_params(
     profile: str | None, stage_names: list[str], params_file: Path | None, assignments: tuple[str, ...]
-) -> dict[str, dict[str, Any]]:
-    """Per-stage values of the profile, then the params file, then `--set`, merged field by field:
+) -> tuple[str, dict[str, dict[str, Any]]]:
+    """The profile's name and the per-stage values of the profile, then the params file, then
+    `--set`, merged field by field:
     a later layer replaces only the fields it names, however deep (`train.env.num_envs` keeps the
     profile's `train.env.backend`)."""
     file_profile, file_values = read_params_file(params_file, stage_names) if params_file else (None, {})
+    name = profile or file_profile or DEFAULT_PROFILE
     layers = [
-        load_profile(profile or file_profile or DEFAULT_PROFILE),
+        load_profile(name),
         file_values,
         parse_assignments(assignments, stage_names),
     ]
     merged: dict[str, Any] = {}
     for layer in layers:
         merge_into(merged, nested(layer))
-    return merged
+    return name, merged
 
 
 def nested(values: dict[str, Any]) -> dict[str, Any]:

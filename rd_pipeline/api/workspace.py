@@ -40,6 +40,8 @@ class Plan:
     """The stages of this source and their layered param values."""
     store: ArtifactStore
     """Where its artifacts are read and written."""
+    profile: str
+    """The profile its params start from."""
 
     @property
     def robot(self) -> str | None:
@@ -77,14 +79,14 @@ def plan(
     if robot is not None:
         load_robot_config(robot)  # unknown robot: one clear line before anything else
     names = [stage.name for stage in REGISTRY]
-    values = layered_params(profile, names, params_file, overrides)
+    profile_name, values = layered_params(profile, names, params_file, overrides)
     if seed is not None:
         for stage in REGISTRY:
             if "seed" in {field.name for field in dataclasses.fields(stage.params)}:
                 values.setdefault(stage.name, {}).setdefault("seed", seed)
     pipeline = Pipeline(REGISTRY, robot, motion, resolve_source(robot, motion, source), values)
     _check_params(pipeline)
-    return Plan(pipeline, ArtifactStore(store or paths.artifacts_dir()))
+    return Plan(pipeline, ArtifactStore(store or paths.artifacts_dir()), profile_name)
 
 
 def _check_params(pipeline: Pipeline) -> None:

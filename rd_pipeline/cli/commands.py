@@ -31,6 +31,7 @@ from rd_pipeline.cli.args import (
     View,
 )
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.profiles import profile_note
 
 
 def run(cmd: Run, console: Console) -> int:
@@ -41,7 +42,8 @@ def run(cmd: Run, console: Console) -> int:
     )
     plan = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
     source = plan.pipeline.source
-    console.print(escape(f"rd-pipeline: {cmd.robot}/{cmd.motion} from {source}, artifacts in {plan.store.root}"))
+    where = f"from {source}, profile {plan.profile}, artifacts in {plan.store.root}"
+    console.print(escape(f"rd-pipeline: {cmd.robot}/{cmd.motion} {where}"))
     outcomes = workspace.run(
         plan,
         start=cmd.from_,
@@ -93,7 +95,7 @@ def _flat(values: dict, prefix: str = "") -> dict[str, object]:
 def print_summary(plan: workspace.Plan, outcomes: list[StageOutcome], console: Console) -> None:
     """Per stage: cached or ran, time, headline metrics; then the report to read."""
     stages = {s.name: s for s in plan.pipeline.registry}
-    console.print(escape(f"summary {plan.robot}/{plan.motion}:"), highlight=False)
+    console.print(escape(f"summary {plan.robot}/{plan.motion}, profile {plan.profile}:"), highlight=False)
     report = None
     for outcome in outcomes:
         stage = stages[outcome.name]
@@ -105,6 +107,9 @@ def print_summary(plan: workspace.Plan, outcomes: list[StageOutcome], console: C
             report = outcome.path / stage.report
     if report is not None:
         console.print(escape(f"report: {report}"), highlight=False)
+    note = profile_note(plan.profile)
+    if note and any(outcome.name == "train" for outcome in outcomes):
+        console.print(f"[yellow]note:[/] {escape(note)}", highlight=False)
 
 
 def _short(value: object) -> str:

@@ -18,6 +18,18 @@ PROFILES = tuple(sorted(p.stem for p in PROFILE_DIR.glob("*.toml")))
 
 
 def load_profile(name: str) -> dict[str, dict[str, Any]]:
+    """The profile's stage tables (its `[profile]` table, about the profile itself, left out)."""
+    tables = _read(name)
+    tables.pop("profile", None)
+    return tables
+
+
+def profile_note(name: str) -> str | None:
+    """What a user should know about results of this profile (`[profile] note`), if anything."""
+    return _read(name).get("profile", {}).get("note")
+
+
+def _read(name: str) -> dict[str, Any]:
     path = PROFILE_DIR / f"{name}.toml"
     if not path.is_file():
         raise PipelineError(f"unknown profile '{name}' (profiles: {', '.join(PROFILES)})")
