@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import tomllib
 from pathlib import Path
 
 from rd_pipeline import robot_configs  # type: ignore[attr-defined]  # mapped from robots/ by setuptools
@@ -16,24 +17,67 @@ ROBOT_CONFIG_DIR = Path(robot_configs.__file__).parent
 """The robots' TOML configurations: `robots/` of the checkout, installed as `rd_pipeline.robot_configs`."""
 
 
-def _env_path(name: str, default: Path | None) -> Path | None:
-    value = os.environ.get(name)
-    return Path(value).expanduser().resolve() if value else default
+SETTINGS_FILE = "rd-pipeline.toml"
+"""Where a checkout records its data folders (`[data]`: `lafan_dir`, `retargeted_dir`,
+`robot_assets`, `artifacts`); found in the working directory or the nearest folder above it.
+`scripts/quickstart.sh` writes one when it finds the data; the `RD_*` variables override it."""
+
+
+def settings_file() -> Path | None:
+    """The nearest `rd-pipeline.toml` at or above the working directory."""
+    here = Path.cwd()
+    for folder in (here, *here.parents):
+        if (folder / SETTINGS_FILE).is_file():
+            return folder / SETTINGS_FILE
+    return None
+
+
+def _data_settings(path: Path) -> dict[str, str]:
+    try:
+        data = tomllib.loads(path.read_text()).get("data", {})
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise PipelineError(f"{path}: cannot be read ({exc})") from None
+    if not isinstance(data, dict) or not all(isinstance(v, str) for v in data.values()):
+        raise PipelineError(f"{path}: [data] must map names to folder paths")
+    return data
+
+
+def _folder(variable: str, key: str, default: str | None) -> Path | None:
+    """`variable` when set, else `key` of the settings file (relative to it), else `default` beside
+    the settings file or, without one, in the working directory."""
+    value = os.environ.get(variable)
+    if value:
+        return Path(value).expanduser().resolve()
+    settings = settings_file()
+    base = settings.parent if settings else Path.cwd()
+    if settings is not None:
+        data = _data_settings(settings)
+        if key in data:
+            return (base / Path(data[key]).expanduser()).resolve()
+    return None if default is None else base / default
 
 
 def lafan_dir() -> Path:
-    """Folder of raw LAFAN1 BVH files (`RD_LAFAN_DIR`, default `raw_lafan/` of the working directory)."""
-    return _env_path("RD_LAFAN_DIR", Path.cwd() / "raw_lafan")  # type: ignore[return-value]
+    """Folder of raw LAFAN1 BVH files (`RD_LAFAN_DIR`, else `lafan_dir` of `rd-pipeline.toml`, else `raw_lafan/`)."""
+    return _folder("RD_LAFAN_DIR", "lafan_dir", "raw_lafan")  # type: ignore[return-value]
 
 
 def retargeted_dir() -> Path | None:
-    """Folder of LAFAN1_Retargeting_Dataset CSVs laid out `<robot>/<motion>.csv` (`RD_RETARGETED_DIR`)."""
-    return _env_path("RD_RETARGETED_DIR", None)
+    """Folder of LAFAN1_Retargeting_Dataset CSVs laid out `<robot>/<motion>.csv` (`RD_RETARGETED_DIR`,
+    else `retargeted_dir` of `rd-pipeline.toml`)."""
+    return _folder("RD_RETARGETED_DIR", "retargeted_dir", None)
+
+
+def robot_assets_dir() -> Path | None:
+    """A folder laid out like unitree_ros `robots/` (`RD_ROBOT_ASSETS`, else `robot_assets` of
+    `rd-pipeline.toml`); None: the `robot_descriptions` clone."""
+    return _folder("RD_ROBOT_ASSETS", "robot_assets", None)
 
 
 def artifacts_dir() -> Path:
-    """Root of the content-addressed artifact store (`RD_ARTIFACTS`, default `artifacts/` of the working directory)."""
-    return _env_path("RD_ARTIFACTS", Path.cwd() / "artifacts")  # type: ignore[return-value]
+    """Root of the content-addressed artifact store (`RD_ARTIFACTS`, else `artifacts` of
+    `rd-pipeline.toml`, else `artifacts/`)."""
+    return _folder("RD_ARTIFACTS", "artifacts", "artifacts")  # type: ignore[return-value]
 
 
 def bvh_path(motion: str) -> Path:

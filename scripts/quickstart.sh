@@ -7,6 +7,27 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# Where the data is, said before the install: the RD_* variables, a rd-pipeline.toml, or ../shared
+# (the team's machines and CI). Found in ../shared, the folders are recorded in rd-pipeline.toml,
+# so `.venv/bin/rd-pipeline ...` finds them later in any shell without RD_* variables.
+if [ -n "${RD_LAFAN_DIR:-}${RD_RETARGETED_DIR:-}" ]; then
+  echo "quickstart: data from the RD_* variables"
+elif [ -f rd-pipeline.toml ]; then
+  echo "quickstart: data folders from rd-pipeline.toml"
+elif [ -d ../shared/data ]; then
+  shared="$(cd ../shared && pwd)"
+  cat > rd-pipeline.toml <<TOML
+# Written by scripts/quickstart.sh: where this checkout's data lives. RD_* variables override it.
+[data]
+lafan_dir = "$shared/data/lafan1/bvh"
+retargeted_dir = "$shared/data/lafan1_retargeted"
+robot_assets = "$shared/robots"
+TOML
+  echo "quickstart: data in $shared, recorded in rd-pipeline.toml"
+else
+  echo "quickstart: no LAFAN1 data here (RD_LAFAN_DIR, RD_RETARGETED_DIR, rd-pipeline.toml, ../shared): lafan1.zip is downloaded after the install"
+fi
+
 if [ -z "${SKIP_INSTALL:-}" ]; then
   if [ ! -x .venv/bin/python ]; then
     python3 -m venv .venv
@@ -18,19 +39,11 @@ if [ -z "${SKIP_INSTALL:-}" ]; then
   PYTHONWARNINGS=ignore::UserWarning .venv/bin/pip install --quiet -e ".[${EXTRAS:-dev}]"
 fi
 
-# On the team's machines and in CI the data sits in ../shared; elsewhere set the variables yourself
-# (README: "Where data comes from").
-if [ -d ../shared/data ]; then
-  export RD_LAFAN_DIR="${RD_LAFAN_DIR:-$(cd ../shared/data/lafan1/bvh && pwd)}"
-  export RD_RETARGETED_DIR="${RD_RETARGETED_DIR:-$(cd ../shared/data/lafan1_retargeted && pwd)}"
-  export RD_ROBOT_ASSETS="${RD_ROBOT_ASSETS:-$(cd ../shared/robots && pwd)}"
-fi
-
 if [ -z "${SKIP_RUN:-}" ]; then
   if ! .venv/bin/rd-pipeline motions >/dev/null 2>&1; then
     echo "quickstart: no LAFAN1 data found; downloading it (rd-pipeline fetch-lafan)"
     if ! .venv/bin/rd-pipeline fetch-lafan; then
-      echo "quickstart: no motion data: run \`.venv/bin/rd-pipeline fetch-lafan\` where lafan1.zip can be downloaded, or set RD_LAFAN_DIR (LAFAN1 BVH files) or RD_RETARGETED_DIR (dataset CSVs) and rerun" >&2
+      echo "quickstart: no motion data: run \`.venv/bin/rd-pipeline fetch-lafan\` where lafan1.zip can be downloaded, or set RD_LAFAN_DIR (LAFAN1 BVH files) or RD_RETARGETED_DIR (dataset CSVs), and RD_ROBOT_ASSETS (robot models), as variables or in rd-pipeline.toml, and rerun" >&2
       exit 1
     fi
   fi

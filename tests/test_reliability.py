@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import LAFAN_DIR, PROJECT, RETARGETED_DIR, cli
+from conftest import LAFAN_DIR, PROJECT, RETARGETED_DIR, ROBOT_ASSETS, cli
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
@@ -211,10 +211,13 @@ def test_quickstart_without_data_says_in_one_line_how_to_get_it(tmp_path: Path) 
         [str(PROJECT / "scripts" / "quickstart.sh")], capture_output=True, text=True, env=env, check=False, timeout=120
     )
     assert result.returncode == 1
-    assert result.stdout.splitlines() == ["quickstart: no LAFAN1 data found; downloading it (rd-pipeline fetch-lafan)"]
+    assert result.stdout.splitlines() == [
+        "quickstart: data from the RD_* variables",
+        "quickstart: no LAFAN1 data found; downloading it (rd-pipeline fetch-lafan)",
+    ]
     last = result.stderr.splitlines()[-1]
     assert last.startswith("quickstart: no motion data: run `.venv/bin/rd-pipeline fetch-lafan`")
-    assert "RD_LAFAN_DIR" in last and "RD_RETARGETED_DIR" in last
+    assert "RD_LAFAN_DIR" in last and "RD_RETARGETED_DIR" in last and "RD_ROBOT_ASSETS" in last
     assert "Traceback" not in result.stderr
 
 
@@ -271,3 +274,48 @@ def test_a_cached_run_checks_the_hashes_it_reports_and_status_fails_on_damage(ar
     assert f"damaged {folder}: reference.npz does not match its sha256" in " ".join(rerun.stderr.split())
     assert "run    import" in rerun.stderr
     assert cli(*status, "--verify").returncode == 0
+
+
+def test_the_data_folders_come_from_rd_pipeline_toml_without_variables(tmp_path: Path) -> None:
+    """What quickstart records beside the data, the CLI reads in a fresh shell, from any folder below."""
+    checkout = tmp_path / "checkout"
+    (checkout / "work").mkdir(parents=True)
+    (checkout / "rd-pipeline.toml").write_text(
+        f'[data]\nlafan_dir = "{LAFAN_DIR}"\nretargeted_dir = "{RETARGETED_DIR}"\nrobot_assets = "{ROBOT_ASSETS}"\n'
+    )
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RD_")}
+    listed = subprocess.run(
+        [sys.executable, "-m", "rd_pipeline", "motions"], capture_output=True, text=True, cwd=checkout / "work", env=env
+    )
+    assert listed.returncode == 0, listed.stderr
+    assert "dance2_subject4    csv:g1 csv:h1 csv:h1_2" in listed.stdout
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rd_pipeline",
+            "run",
+            "--robot",
+            "h1_2",
+            "--motion",
+            "dance2_subject4",
+            "--until",
+            "import",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=checkout / "work",
+        env=env,
+    )
+    assert run.returncode == 0, run.stderr
+    assert f"artifacts in {checkout / 'artifacts'}" in run.stderr  # beside the settings file, not in work/
+    assert list((checkout / "artifacts" / "import" / "h1_2" / "dance2_subject4").iterdir())
+    env["RD_ARTIFACTS"] = str(tmp_path / "elsewhere")  # a variable overrides the file
+    again = subprocess.run(
+        [sys.executable, "-m", "rd_pipeline", "plan", "--robot", "h1_2", "--motion", "dance2_subject4"],
+        capture_output=True,
+        text=True,
+        cwd=checkout,
+        env=env,
+    )
+    assert f"artifacts in {tmp_path / 'elsewhere'}" in again.stdout

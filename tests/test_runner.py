@@ -123,7 +123,11 @@ def test_unknown_robot_and_motion_are_one_line(artifacts: Path) -> None:
     assert result.returncode == 2
     line = result.stderr.strip()
     assert line.startswith("error: no data for motion 'tango'") and len(line.splitlines()) == 1
-    hint = "`rd-pipeline fetch-lafan` downloads LAFAN1's BVH files, or set RD_LAFAN_DIR to a folder that has them"
+    hint = (
+        "`rd-pipeline fetch-lafan` downloads LAFAN1's BVH files, or point RD_LAFAN_DIR (BVH files), "
+        "RD_RETARGETED_DIR (dataset CSVs) and RD_ROBOT_ASSETS (robot models) at the data, as variables "
+        "or in rd-pipeline.toml"
+    )
     assert line.endswith(hint)
 
 

@@ -151,10 +151,11 @@ def resolve_source(robot: str | None, motion: str, forced: str | None) -> str:
     csv = paths.csv_path(robot, motion) if robot else None
     if csv is not None and csv.is_file():
         return "csv"
-    where = f"{paths.bvh_path(motion)}" + (f" nor {csv}" if csv else " (and RD_RETARGETED_DIR is not set)")
+    where = f"{paths.bvh_path(motion)}" + (f" nor {csv}" if csv else " (and no dataset CSV folder is set)")
     raise PipelineError(
         f"no data for motion '{motion}': neither {where} exists; `rd-pipeline fetch-lafan` downloads "
-        "LAFAN1's BVH files, or set RD_LAFAN_DIR to a folder that has them"
+        "LAFAN1's BVH files, or point RD_LAFAN_DIR (BVH files), RD_RETARGETED_DIR (dataset CSVs) and "
+        f"RD_ROBOT_ASSETS (robot models) at the data, as variables or in {paths.SETTINGS_FILE}"
     )
 
 

@@ -2,19 +2,18 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
+from rd_pipeline import paths
 from rd_pipeline.errors import PipelineError
 
 
 def assets_root() -> Path:
     """A folder laid out like unitree_ros `robots/` (holds `g1_description/`, `h1_description/`, ...)."""
-    value = os.environ.get("RD_ROBOT_ASSETS")
-    if value:
-        root = Path(value).expanduser().resolve()
+    root = paths.robot_assets_dir()
+    if root is not None:
         if not root.is_dir():
-            raise PipelineError(f"RD_ROBOT_ASSETS={value}: not a folder")
+            raise PipelineError(f"robot assets {root} (RD_ROBOT_ASSETS or rd-pipeline.toml): not a folder")
         return root
     try:
         from robot_descriptions._cache import clone_to_cache
