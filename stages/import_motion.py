@@ -58,6 +58,8 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     p = ctx.params
     robot = load_robot(ctx.robot_name)
     result = import_retargeted_csv(ctx.inputs["csv"], robot, p.source_fps, p.fps, p.interpolation, p.contact)
+    for warning in result.warnings:
+        ctx.console.print(f"[yellow]warning:[/] {escape(warning)}", highlight=False, soft_wrap=True)
     if result.dropped_joints:
         ctx.console.print(
             escape(f"  dataset joints not in the {ctx.robot} model, dropped: {', '.join(result.dropped_joints)}")

@@ -161,6 +161,16 @@ BAD_INPUTS = {
         134,
         "Frame Time must be a positive number, got -0.033333",
     ),
+    "a 10 s frame time": (
+        lambda lines: lines.__setitem__(133, "Frame Time: 10"),
+        134,
+        "Frame Time 10 s is 0.1 fps; motion capture is 20 to 500 fps (Frame Time 0.002 to 0.05 s)",
+    ),
+    "a 10 kHz frame time": (
+        lambda lines: lines.__setitem__(133, "Frame Time: 0.0001"),
+        134,
+        "Frame Time 0.0001 s is 1e+04 fps; motion capture is 20 to 500 fps (Frame Time 0.002 to 0.05 s)",
+    ),
     "no motion section": (
         lambda lines: lines.__delitem__(slice(131, None)),
         131,

@@ -135,3 +135,39 @@ def test_cli_import_writes_the_reference_artifact(artifacts: Path) -> None:
     assert reference.fps == 50.0 and reference.duration_s == pytest.approx(225.7)
     manifest = (folder / "manifest.json").read_text()
     assert '"fps": 50.0' in manifest and '"frames": 11285' in manifest
+
+
+def test_renormalised_quaternions_are_counted_in_a_warning(tmp_path: Path) -> None:
+    rows = (RETARGETED_DIR / "h1" / "dance1_subject1.csv").read_text().splitlines()
+    for line in (10, 11, 500):  # three rows with their quaternion scaled by 1.5
+        fields = rows[line - 1].split(",")
+        fields[3:7] = [repr(1.5 * float(v)) for v in fields[3:7]]
+        rows[line - 1] = ",".join(fields)
+    path = tmp_path / "h1" / "dance1_subject1.csv"
+    path.parent.mkdir()
+    path.write_text("\n".join(rows) + "\n")
+    result = import_retargeted_csv(path, load_robot("h1"), 30.0, 50.0, "cubic", ContactThresholds())
+    (warning,) = result.warnings
+    assert warning == (
+        f"{path}: 3 of {len(rows)} root quaternions are not of unit norm and were renormalised "
+        "(first at line 10, norm 1.500)"
+    )
+    clean = import_retargeted_csv(
+        RETARGETED_DIR / "h1" / "dance1_subject1.csv", load_robot("h1"), 30.0, 50.0, "cubic", ContactThresholds()
+    )
+    assert clean.warnings == ()
+    assert np.allclose(result.reference.root_quat, clean.reference.root_quat, atol=1e-9)  # same motion
+    said = cli(
+        "run",
+        "--robot",
+        "h1",
+        "--motion",
+        "dance1_subject1",
+        "--source",
+        "csv",
+        "--until",
+        "import",
+        env={"RD_RETARGETED_DIR": str(tmp_path), "RD_ARTIFACTS": str(tmp_path / "store")},
+    )
+    assert said.returncode == 0, said.stderr
+    assert f"warning: {warning}" in " ".join(said.stderr.split())

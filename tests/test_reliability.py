@@ -319,3 +319,18 @@ def test_the_data_folders_come_from_rd_pipeline_toml_without_variables(tmp_path:
         env=env,
     )
     assert f"artifacts in {tmp_path / 'elsewhere'}" in again.stdout
+
+
+def test_a_clip_beyond_the_motion_is_refused_before_any_stage(artifacts: Path) -> None:
+    """The motion's length comes from the BVH header or the CSV's rows, not from running upstream."""
+    result = cli("run", "--clip", "500:600")
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        "error: train.clip '500:600' leaves less than 1 s of the 131.50 s motion"
+    ]
+    on_csv = cli("run", "--robot", "h1_2", "--motion", "dance2_subject4", "--set", "train.clip=300:310")
+    assert on_csv.stderr.strip().splitlines()[-1] == (
+        "error: train.clip '300:310' leaves less than 1 s of the 225.70 s motion"
+    )
+    assert not artifacts.exists()
+    assert cli("plan", "--clip", "125:200").returncode == 0  # clamped to the end by train, with a warning

@@ -26,7 +26,9 @@ from rd_pipeline.artifacts.runner import Pipeline, PlannedStage, StageOutcome, e
 from rd_pipeline.artifacts.stage import Stage
 from rd_pipeline.artifacts.store import MANIFEST, ArtifactStore
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion.duration import bvh_duration_s, csv_duration_s
 from rd_pipeline.params import layered_params
+from rd_pipeline.rl.training_config import clip_frames
 from rd_pipeline.rl.training_log import checkpoints_by_iteration, read_training_log
 from rd_pipeline.robots.config import load_robot_config
 from rd_pipeline.stages import REGISTRY
@@ -107,6 +109,19 @@ def _check_params(pipeline: Pipeline) -> None:
             f"{trainer.name}.env.physics_dt * {trainer.name}.env.decimation give a {control_hz:g} Hz control rate, "
             f"but {maker.name}.fps is {fps:g}: the policy steps once per reference frame"
         )
+    clip = params[trainer.name].clip
+    if clip:
+        frames = round(_source_duration_s(pipeline) * fps)
+        clip_frames(clip, fps, frames, warn=lambda message: None)  # the train stage says what it clamps
+
+
+def _source_duration_s(pipeline: Pipeline) -> float:
+    """The motion's length from its source file's header or line count."""
+    if pipeline.source == "bvh":
+        return bvh_duration_s(paths.bvh_path(pipeline.motion))
+    csv = paths.csv_path(pipeline.robot, pipeline.motion) if pipeline.robot else None
+    assert csv is not None  # resolve_source chose csv because the file exists
+    return csv_duration_s(csv, pipeline.params["import"].source_fps)
 
 
 def run(

@@ -63,6 +63,10 @@ class Plan:
     """Seed for stages that draw random numbers."""
     source: str | None = None
     """Force the motion source: `bvh` (parse + retarget) or `csv` (import)."""
+    clip: str | None = None
+    """Train on part of the motion, `START:END` in seconds (sets train.clip)."""
+    backend: str | None = None
+    """Physics backend for training, `rollout`, `cpu` or `warp` (sets train.env.backend)."""
     set: tuple[str, ...] = ()
     """Parameter overrides, `stage.param=value`."""
     params_file: Path | None = None

@@ -34,12 +34,15 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.profiles import profile_note
 
 
+def _assignments(cmd: Run | Plan) -> tuple[str, ...]:
+    """`--set` with the shorthands `--clip` and `--backend` spelled out."""
+    clip = (f"train.clip={cmd.clip}",) if cmd.clip else ()
+    backend = (f"train.env.backend={cmd.backend}",) if cmd.backend else ()
+    return cmd.set + clip + backend
+
+
 def run(cmd: Run, console: Console) -> int:
-    assignments = (
-        cmd.set
-        + ((f"train.clip={cmd.clip}",) if cmd.clip else ())
-        + ((f"train.env.backend={cmd.backend}",) if cmd.backend else ())
-    )
+    assignments = _assignments(cmd)
     plan = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
     source = plan.pipeline.source
     where = f"from {source}, profile {plan.profile}, artifacts in {plan.store.root}"
@@ -58,7 +61,8 @@ def run(cmd: Run, console: Console) -> int:
 
 
 def plan(cmd: Plan, console: Console) -> int:
-    planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, cmd.set, cmd.seed, cmd.source)
+    assignments = _assignments(cmd)
+    planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
     rows: list[dict[str, Any]] = [
         {
             "stage": entry.name,

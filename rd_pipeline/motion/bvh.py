@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion import PLAUSIBLE_FPS
 
 _ROTATION_CHANNELS = {"Xrotation": "X", "Yrotation": "Y", "Zrotation": "Z"}
 _POSITION_CHANNELS = {"Xposition": 0, "Yposition": 1, "Zposition": 2}
@@ -102,6 +103,12 @@ class _Parser:
         frame_time = self.header_number("Frame Time:", float)
         if not np.isfinite(frame_time) or frame_time <= 0:
             raise self.fail(f"Frame Time must be a positive number, got {frame_time}")
+        low, high = PLAUSIBLE_FPS
+        if not low <= 1.0 / frame_time <= high:
+            raise self.fail(
+                f"Frame Time {frame_time:g} s is {1.0 / frame_time:.4g} fps; motion capture is {low:g} to {high:g} fps "
+                f"(Frame Time {1.0 / high:g} to {1.0 / low:g} s)"
+            )
         channels = self.motion_block(n_frames)
         return BvhClip(tuple(self.joints), frame_time, channels, tuple(self.warnings))
 

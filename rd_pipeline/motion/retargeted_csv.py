@@ -11,7 +11,7 @@ from scipy.interpolate import interp1d
 from scipy.spatial.transform import Rotation, Slerp
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.motion import too_short
+from rd_pipeline.motion import QUATERNION_NORM_TOLERANCE, too_short
 from rd_pipeline.motion.bvh import is_float
 from rd_pipeline.motion.contact import ContactThresholds, label_contacts
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
@@ -28,6 +28,8 @@ class CsvImportResult:
     """Dataset joints the configured model does not have (e.g. the 29-DoF G1's waist roll/pitch)."""
     source_frames: int
     """Rows in the CSV."""
+    warnings: tuple[str, ...] = ()
+    """What was read but repaired (renormalised quaternions), one line each."""
 
 
 def read_retargeted_csv(path: Path, n_joints: int) -> np.ndarray:
@@ -68,6 +70,7 @@ def import_retargeted_csv(
     if np.any(quat_norm < 0.5):
         line = int(np.argmax(quat_norm < 0.5)) + 1
         raise PipelineError(f"{path}:{line}: root quaternion has norm {quat_norm[line - 1]:.3f}")
+    warnings = _renormalised(path, quat_norm)
     columns = {name: 7 + i for i, name in enumerate(config.csv_joints)}
     missing = [j for j in config.joint_names if j not in columns]
     if missing:
@@ -101,4 +104,16 @@ def import_retargeted_csv(
     ground_z = float(np.percentile(foot_pos[..., 2].min(axis=1), 1.0))
     labels = label_contacts(foot_pos, target_fps, ground_z, contact)
     reference = dataclasses.replace(reference, foot_contact=labels)
-    return CsvImportResult(reference=reference, dropped_joints=dropped, source_frames=n_source)
+    return CsvImportResult(reference=reference, dropped_joints=dropped, source_frames=n_source, warnings=warnings)
+
+
+def _renormalised(path: Path, quat_norm: np.ndarray) -> tuple[str, ...]:
+    """A warning counting the root quaternions that are not of unit norm (Slerp normalises them)."""
+    off = np.abs(quat_norm - 1.0) > QUATERNION_NORM_TOLERANCE
+    if not off.any():
+        return ()
+    line = int(np.argmax(off)) + 1
+    return (
+        f"{path}: {int(off.sum())} of {len(quat_norm)} root quaternions are not of unit norm and were "
+        f"renormalised (first at line {line}, norm {quat_norm[line - 1]:.3f})",
+    )
