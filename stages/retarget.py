@@ -34,7 +34,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         human,
         robot,
         p,
-        track=lambda frames, total: ctx.track(frames, total, f"IK {ctx.robot}"),
+        track=lambda frames, total, label: ctx.track(frames, total, f"{ctx.robot} {label}"),
     )
     seconds = time.perf_counter() - began
     reference, targets = result.reference, result.targets

@@ -155,3 +155,21 @@ def test_a_control_rate_off_the_reference_fps_is_refused_before_any_stage(artifa
     assert not artifacts.exists()
     agreeing = cli("plan", "--set", "train.env.decimation=4", "retarget.fps=125")
     assert agreeing.returncode == 0, agreeing.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (("stage", "train", "--motion", "dance1_subject2"), "error: stage 'train' needs --robot"),
+        (
+            ("run", "--only", "train", "--until", "export"),
+            "error: --only runs one stage; it cannot be combined with --until",
+        ),
+        (("status", "--robot", "g9"), "error: unknown robot 'g9'"),
+    ],
+)
+def test_misused_options_name_what_is_wrong(args: tuple[str, ...], message: str, artifacts: Path) -> None:
+    result = cli(*args)
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines()[-1].startswith(message)
+    assert not artifacts.exists()

@@ -113,6 +113,9 @@ class Pipeline:
                     f"{self.robot}/{self.motion} (stages: {', '.join(names)})"
                 )
         if only is not None:
+            if start is not None or until is not None:
+                given = "--from" if start is not None else "--until"
+                raise PipelineError(f"--only runs one stage; it cannot be combined with {given}")
             start = until = only
         first = names.index(start) if start else 0
         last = names.index(until) if until else len(chain) - 1

@@ -32,6 +32,7 @@ from rd_pipeline.cli.args import (
 )
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.profiles import profile_note
+from rd_pipeline.robots.config import available_robots, load_robot_config
 
 
 def _assignments(cmd: Run | Plan) -> tuple[str, ...]:
@@ -122,6 +123,8 @@ def _short(value: object) -> str:
 
 def stage(cmd: StageCommand, console: Console) -> int:
     chosen = workspace.registered_stage(cmd.name)
+    if chosen.per_robot and cmd.robot is None:
+        raise PipelineError(f"stage '{cmd.name}' needs --robot")
     planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, cmd.set, cmd.seed, chosen.source)
     workspace.run(
         planned,
@@ -135,6 +138,8 @@ def stage(cmd: StageCommand, console: Console) -> int:
 
 def status(cmd: Status, console: Console) -> int:
     root = paths.artifacts_dir()
+    if cmd.robot is not None:
+        load_robot_config(cmd.robot)  # an unknown robot is said as such, not as "no artifacts"
     if cmd.robot and cmd.motion:
         pairs: list[tuple[str | None, str]] = [(cmd.robot, cmd.motion)]
     else:
@@ -248,8 +253,6 @@ def fetch_lafan(cmd: FetchLafan, console: Console) -> int:
 
 
 def robots(cmd: Robots, console: Console) -> int:
-    from rd_pipeline.robots.config import available_robots, load_robot_config
-
     for name in available_robots():
         config = load_robot_config(name)
         print(
@@ -290,7 +293,9 @@ def _run_trials(cmd: Sweep, trials: list[sweeps.Trial], label: str, console: Con
         resume=cmd.resume,
     )
     summary = sweeps.write_summary(results, out, sweeps.SWEEP_COLUMNS)
-    table = Table("trial", "status", *sweeps.SWEEP_COLUMNS, title=f"{label} summary")
+    table = Table(title=f"{label} summary")
+    for column in ("trial", "status", *sweeps.SWEEP_COLUMNS):
+        table.add_column(column, overflow="fold")  # whole robot and motion names, folded, never cut
     for r in results:
         table.add_row(
             escape(r.trial.label),

@@ -8,6 +8,10 @@ ONNX file alone says which joint each output drives, with what gains and action 
 
 from __future__ import annotations
 
+import logging
+import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import torch
@@ -50,16 +54,17 @@ def export_onnx(module: torch.nn.Module, observation_size: int, spec: PolicySpec
 
     probe = torch.zeros(2, observation_size)
     batch = torch.export.Dim("batch", min=1)
-    program = torch.onnx.export(
-        module.eval(),
-        (probe,),
-        dynamo=True,
-        opset_version=OPSET,
-        input_names=["obs"],
-        output_names=["actions"],
-        dynamic_shapes=({0: batch},),
-        verbose=False,
-    )
+    with _quiet_exporter():
+        program = torch.onnx.export(
+            module.eval(),
+            (probe,),
+            dynamo=True,
+            opset_version=OPSET,
+            input_names=["obs"],
+            output_names=["actions"],
+            dynamic_shapes=({0: batch},),
+            verbose=False,
+        )
     assert program is not None  # the dynamo exporter always returns its program
     model = program.model_proto
     for key, value in onnx_metadata(spec).items():
@@ -68,3 +73,18 @@ def export_onnx(module: torch.nn.Module, observation_size: int, spec: PolicySpec
         entry.value = value
     onnx.checker.check_model(model)
     onnx.save(model, str(path))
+
+
+@contextmanager
+def _quiet_exporter() -> Iterator[None]:
+    """The exporter logs that torchvision's operators are not installed (a policy uses none) and
+    pytree FutureWarnings of its own: nothing a user of the exported file can act on."""
+    registration = logging.getLogger("torch.onnx._internal.exporter._registration")
+    level = registration.level
+    registration.setLevel(logging.ERROR)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FutureWarning)
+            yield
+    finally:
+        registration.setLevel(level)

@@ -39,9 +39,10 @@ def retarget(
     human: HumanMotion,
     robot: Robot,
     params: RetargetConfig,
-    track: Callable[[Iterable[int], int], Iterable[int]] = lambda frames, total: frames,
+    track: Callable[[Iterable[int], int, str], Iterable[int]] = lambda frames, total, label: frames,
 ) -> RetargetResult:
-    """Retarget `human` onto `robot` with `params`; `track` wraps the frame loops (progress bars).
+    """Retarget `human` onto `robot` with `params`; `track` wraps the frame loops (progress bars,
+    labelled by pass).
 
     Per-frame IK against the targets; stretches that fell far behind them solved again from both
     ends; then a sequence-level pass: the whole trajectory is smoothed and the feet are put back on
@@ -58,7 +59,7 @@ def retarget(
     targets = build_targets(human, robot, fps, feet.vertices, params.contact, params.shape, params.body_contact)
     hulls = BodyHulls.from_robot(robot)
     ik = RetargetIk(robot, targets, params.weights, settings, hulls)
-    qpos = ik.solve(track(range(targets.n_frames), targets.n_frames))
+    qpos = ik.solve(track(range(targets.n_frames), targets.n_frames, "whole-body IK"))
     qpos, repaired = repair_lag(ik, qpos, params.repair)
     if settings.trajectory_smoothing_s > 0:
         smoothed = _smooth_trajectory(robot, qpos, settings.trajectory_smoothing_s * fps)
@@ -68,7 +69,7 @@ def retarget(
         close = colliding_frames(robot, smoothed, -clearance)
         keep_ik = np.minimum(smooth_cover(close.astype(float), fps, settings.ik_blend_s), 1.0)
         qpos = blend_configurations(smoothed, qpos, keep_ik)
-        qpos = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames))
+        qpos = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames, "feet on the smoothed motion"))
     reference = _reference(robot, qpos, targets)
     # The IK keeps every body above the floor; smoothing can still dip a body by a few millimetres.
     lowest = hulls.lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
