@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from rd_pipeline.evaluation.runtimes import OnnxPolicy
+from rd_pipeline.policy_runtime import OnnxPolicy
 from rd_pipeline.policy_spec import ONNX_FILE, POLICY_FILE, SPEC_FILE, load_policy_spec
 
 BLOCK = 100

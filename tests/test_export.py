@@ -16,10 +16,10 @@ from tensordict import TensorDict
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.deploy import DeployController
-from rd_pipeline.evaluation.runtimes import OnnxPolicy
 from rd_pipeline.export.exporter import build_policy_spec, load_actor, script_actor
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+from rd_pipeline.policy_runtime import OnnxPolicy
 from rd_pipeline.policy_spec import load_policy_spec
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig

@@ -143,6 +143,12 @@ class Stage:
     artifact of this stage that differs from it only in these (`StageContext.shorter`)."""
 
 
+def typed_config(config_type: type[T], values: dict[str, Any], prefix: str) -> T:
+    """A config dataclass from nested values (a manifest's recorded params), each value checked
+    against its field's type; `prefix` names the fields in errors (`train`)."""
+    return _override(config_type(), values, prefix)
+
+
 def build_params(stage: Stage, values: dict[str, Any]) -> Any:
     """The stage's params from defaults overridden by `values`, each checked against its type.
 

@@ -9,8 +9,6 @@ backend that training uses on CPU (one physics implementation); one policy call 
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import mujoco
 import numpy as np
 import torch
@@ -18,9 +16,6 @@ import torch
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.policy_spec import PolicySpec
 from rd_pipeline.rl.actions import ActionTargets
-
-Policy = Callable[[np.ndarray], np.ndarray]
-"""(R, observation_size) float32 -> (R, num_actions)."""
 
 
 def projected_gravity(quat_wxyz: np.ndarray) -> np.ndarray:

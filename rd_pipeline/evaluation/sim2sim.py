@@ -14,9 +14,10 @@ import mujoco
 import numpy as np
 import torch
 
-from rd_pipeline.evaluation.deploy import DeployController, Policy
+from rd_pipeline.evaluation.deploy import DeployController
 from rd_pipeline.evaluation.protocol import Protocol
 from rd_pipeline.motion.reference import ReferenceMotion
+from rd_pipeline.policy_runtime import Policy
 from rd_pipeline.policy_spec import PolicySpec
 from rd_pipeline.rl.env_config import Randomization
 from rd_pipeline.rl.physics import MujocoCpuBackend

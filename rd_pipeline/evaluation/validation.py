@@ -13,14 +13,14 @@ import numpy as np
 import torch
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.evaluation.deploy import Policy, reference_baseline_spec
+from rd_pipeline.evaluation.deploy import reference_baseline_spec
 from rd_pipeline.evaluation.metrics import drift, summarize, t_interval
 from rd_pipeline.evaluation.report import CONTROLLERS
-from rd_pipeline.evaluation.runtimes import load_runtimes
 from rd_pipeline.evaluation.sim2sim import BodySets, Rollout, randomized_models, run_rollouts
 from rd_pipeline.evaluation.validation_config import ValidationConfig
 from rd_pipeline.evaluation.validation_report import ValidationReport
 from rd_pipeline.motion.reference import ReferenceMotion
+from rd_pipeline.policy_runtime import Policy, load_runtimes
 from rd_pipeline.policy_spec import SPEC_FILE, PolicySpec, load_policy_spec
 from rd_pipeline.rl.sim_model import pd_simulation_model
 from rd_pipeline.robots import Robot

@@ -14,7 +14,8 @@ from tensordict import TensorDict
 
 from rd_pipeline.policy_spec import FORMAT_VERSION, PolicySpec
 from rd_pipeline.rl.actions import joint_semantics
-from rd_pipeline.rl.observations import ObservationsConfig, actor_terms, layout_json
+from rd_pipeline.rl.env_config import EnvConfig
+from rd_pipeline.rl.observations import actor_terms, layout_json
 from rd_pipeline.robots import Robot
 
 
@@ -42,18 +43,23 @@ def script_actor(actor: MLPModel) -> torch.jit.ScriptModule:
 
 
 def build_policy_spec(
-    robot: Robot, env: dict, num_actions: int, reference_stage: str, reference_key: str, clip_frames: tuple[int, int]
+    robot: Robot,
+    env: EnvConfig,
+    num_actions: int,
+    reference_stage: str,
+    reference_key: str,
+    clip_frames: tuple[int, int],
 ) -> PolicySpec:
-    """`policy.json` from the robot config and the training run's environment params (as in its manifest)."""
+    """`policy.json` from the robot config and the training run's environment config."""
     config = robot.config
     policy = [config.joint_names[i] for i in config.policy_indices]
     lower, upper = robot.joint_range[config.policy_indices].T
-    actions = env["actions"]
-    semantics = joint_semantics(config, actions["mode"])
+    actions = env.actions
+    semantics = joint_semantics(config, actions.mode)
     outputs = [joint for joint, kind in zip(policy, semantics) if kind != "reference"]
     if len(outputs) != num_actions:
         raise ValueError(f"the checkpoint's actor has {num_actions} outputs, the action mode implies {len(outputs)}")
-    terms = actor_terms(len(policy), num_actions, ObservationsConfig(**env["observations"]))
+    terms = actor_terms(len(policy), num_actions, env.observations)
     floats = lambda values: [float(v) for v in values]
     return PolicySpec(
         {
@@ -71,9 +77,9 @@ def build_policy_spec(
                 "policy_upper": floats(upper),
             },
             "action": {
-                "mode": actions["mode"],
-                "scale": float(actions["scale"]),
-                "clip": float(actions["clip"]),
+                "mode": actions.mode,
+                "scale": float(actions.scale),
+                "clip": float(actions.clip),
                 "residual_mask": [i for i, kind in enumerate(semantics) if kind == "residual"],
                 "outputs": outputs,
                 "semantics": list(semantics),
@@ -82,10 +88,10 @@ def build_policy_spec(
                 "scale * clip(action, -clip, clip); targets projected to [policy_lower, policy_upper]; "
                 "actuated joints outside the policy hold default_pos",
             },
-            "observation": layout_json(terms, int(env["history"])),
+            "observation": layout_json(terms, int(env.history)),
             "rates": {
-                "control_hz": 1.0 / (env["physics_dt"] * env["decimation"]),
-                "physics_hz": 1.0 / env["physics_dt"],
+                "control_hz": 1.0 / (env.physics_dt * env.decimation),
+                "physics_hz": 1.0 / env.physics_dt,
             },
             "reference": {
                 "stage": reference_stage,

@@ -3,15 +3,18 @@ onnxruntime, both as numpy (R, observation_size) -> (R, num_actions) functions."
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from rd_pipeline.evaluation.deploy import Policy
 from rd_pipeline.policy_spec import ONNX_FILE, POLICY_FILE
 
 RUNTIMES = ("torchscript", "onnx")
+
+Policy = Callable[[np.ndarray], np.ndarray]
+"""(R, observation_size) float32 -> (R, num_actions)."""
 
 
 class OnnxPolicy:
