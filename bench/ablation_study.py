@@ -30,9 +30,16 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from findings import (  # bench/findings.py
+    PAPER_RESAMPLING,
+    PAPER_TABLE_R5,
+    RESIDUAL_CLAIMS,
+    SAMPLER_CLAIMS,
+    Claim,
+    judge,
+)
 
 from rd_pipeline.api.ablation import STUDIES, format_cell
-from rd_pipeline.api.findings import PAPER_RESAMPLING, PAPER_TABLE_R5, RESIDUAL_CLAIMS, SAMPLER_CLAIMS, Claim, judge
 from rd_pipeline.api.sweeps import Trial, trial_artifact
 from rd_pipeline.api.workspace import training_seconds
 from rd_pipeline.artifacts.store import MANIFEST
