@@ -13,8 +13,8 @@ DEFAULT_MOTION = "dance1_subject2"
 
 
 @dataclass(frozen=True)
-class Run:
-    """Run the DAG for one robot and motion; cached stages do no work."""
+class PlanOptions:
+    """What determines a run's DAG: robot, motion, and the params every stage gets."""
 
     robot: str = DEFAULT_ROBOT
     """Robot (`rd-pipeline robots`)."""
@@ -22,18 +22,6 @@ class Run:
     """Motion (`rd-pipeline motions`)."""
     profile: str | None = None
     """Parameter profile: smoke, cpu or paper (default: the params file's, else smoke)."""
-    from_: Annotated[str | None, tyro.conf.arg(name="from")] = None
-    """First stage to run (parse, retarget, import, stats, prior, train, export, validate); earlier
-    stages must already be cached."""
-    until: str | None = None
-    """Last stage to run (one of the stages above)."""
-    only: str | None = None
-    """Run just this stage (one of the stages above)."""
-    force: bool = False
-    """Recompute the selected stages even when cached."""
-    resume: bool = False
-    """Continue an interrupted long stage (training) from its last checkpoint, or grow a finished
-    training that differs only in fewer iterations."""
     seed: int = 0
     """Seed for stages that draw random numbers."""
     source: str | None = None
@@ -49,28 +37,28 @@ class Run:
 
 
 @dataclass(frozen=True)
-class Plan:
+class Run(PlanOptions):
+    """Run the DAG for one robot and motion; cached stages do no work."""
+
+    from_: Annotated[str | None, tyro.conf.arg(name="from")] = None
+    """First stage to run (parse, retarget, import, stats, prior, train, export, validate); earlier
+    stages must already be cached."""
+    until: str | None = None
+    """Last stage to run (one of the stages above)."""
+    only: str | None = None
+    """Run just this stage (one of the stages above)."""
+    force: bool = False
+    """Recompute the selected stages even when cached (an interrupted training starts over)."""
+    resume: bool = False
+    """Grow a finished training that differs only in fewer iterations (an interrupted training
+    continues from its checkpoints without it)."""
+
+
+@dataclass(frozen=True)
+class Plan(PlanOptions):
     """Show the DAG a run would execute: each stage's key, whether it is cached, its resolved params;
     runs nothing."""
 
-    robot: str = DEFAULT_ROBOT
-    """Robot (`rd-pipeline robots`)."""
-    motion: str = DEFAULT_MOTION
-    """Motion (`rd-pipeline motions`)."""
-    profile: str | None = None
-    """Parameter profile: smoke, cpu or paper (default: the params file's, else smoke)."""
-    seed: int = 0
-    """Seed for stages that draw random numbers."""
-    source: str | None = None
-    """Force the motion source: `bvh` (parse + retarget) or `csv` (import)."""
-    clip: str | None = None
-    """Train on part of the motion, `START:END` in seconds (sets train.clip)."""
-    backend: str | None = None
-    """Physics backend for training, `rollout`, `cpu` or `warp` (sets train.env.backend)."""
-    set: tuple[str, ...] = ()
-    """Parameter overrides, `stage.param=value`."""
-    params_file: Path | None = None
-    """A DVC-style params file (`params.yaml`) with a `stages:` table."""
     json: bool = False
     """Print a JSON list of `{"stage", "key", "cached", "params"}` instead of a table."""
 
@@ -90,8 +78,8 @@ class StageCommand:
     force: bool = False
     """Recompute even when cached."""
     resume: bool = False
-    """Continue an interrupted long stage (training) from its last checkpoint, or grow a finished
-    training that differs only in fewer iterations."""
+    """Grow a finished training that differs only in fewer iterations (an interrupted training
+    continues from its checkpoints without it)."""
     seed: int = 0
     """Seed for stages that draw random numbers."""
     set: tuple[str, ...] = ()

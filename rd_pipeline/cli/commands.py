@@ -23,6 +23,7 @@ from rd_pipeline.cli.args import (
     FetchLafan,
     Motions,
     Plan,
+    PlanOptions,
     Robots,
     Run,
     StageCommand,
@@ -35,7 +36,7 @@ from rd_pipeline.profiles import profile_note
 from rd_pipeline.robots.config import available_robots, load_robot_config
 
 
-def _assignments(cmd: Run | Plan) -> tuple[str, ...]:
+def _assignments(cmd: PlanOptions) -> tuple[str, ...]:
     """`--set` with the shorthands `--clip` and `--backend` spelled out."""
     clip = (f"train.clip={cmd.clip}",) if cmd.clip else ()
     backend = (f"train.env.backend={cmd.backend}",) if cmd.backend else ()
