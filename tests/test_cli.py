@@ -7,19 +7,21 @@ import zipfile
 from pathlib import Path
 
 import pytest
-from conftest import LAFAN_DIR, RETARGETED_DIR, cli
+from conftest import LAFAN_DIR, PROJECT, RETARGETED_DIR, cli
 
 from rd_pipeline.profiles import PROFILES
 from rd_pipeline.stages import REGISTRY
 
 
 @pytest.mark.offline
-def test_robots_lists_the_three_configs() -> None:
+def test_robots_lists_every_config() -> None:
     result = cli("robots")
     assert result.returncode == 0
-    lines = result.stdout.splitlines()
-    assert [line.split()[0] for line in lines] == ["g1", "h1", "h1_2"]
-    assert "27 joints, 21 policy" in lines[2]
+    table = {line.split()[0]: line for line in result.stdout.splitlines()}
+    assert sorted(table) == sorted(path.stem for path in (PROJECT / "robots").glob("*.toml"))
+    assert "27 joints, 21 policy" in table["h1_2"]
+    assert "29 joints, 29 policy" in table["g1_29dof"]
+    assert len({line.index(" joints") for line in table.values()}) == 1  # one column, whatever the names
 
 
 def test_motions_lists_sources() -> None:

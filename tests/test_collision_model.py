@@ -9,6 +9,7 @@ import trimesh
 
 from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
+from rd_pipeline.robots.config import available_robots
 from rd_pipeline.robots.primitives import fit_collision_meshes, mesh_vertices_in_body
 
 COVER_TOLERANCE_M = 1e-6
@@ -32,7 +33,7 @@ def _surface_points(model: mujoco.MjModel, geom: int, rng: np.random.Generator) 
     return np.concatenate([vertices, np.einsum("fk,fkd->fd", weights, vertices[faces])])
 
 
-@pytest.mark.parametrize("name", ["g1", "h1", "h1_2"])
+@pytest.mark.parametrize("name", available_robots())
 def test_fitted_primitives_cover_each_collision_mesh(name: str) -> None:
     model, foot_bodies = _model(name)
     meshes = [g for g in range(model.ngeom) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH]
@@ -58,7 +59,7 @@ def test_a_primitive_that_misses_part_of_its_mesh_is_seen() -> None:
     assert shape.signed_distance(raised).max() > 0.005
 
 
-@pytest.mark.parametrize("name", ["g1", "h1", "h1_2"])
+@pytest.mark.parametrize("name", available_robots())
 def test_primitive_model_collides_with_the_floor_and_only_in_config_pairs(name: str) -> None:
     robot = load_robot(name)
     model = simulation_model(robot, collision="primitive")

@@ -149,3 +149,23 @@ def test_every_robot_exports_both_formats(
     assert columns == 7 + len(robot.config.csv_joints)
     task_joints = hinge_names(task_model(robot)[0])
     assert np.load(tmp_path / f"{robot_name}.npz")["joint_pos"].shape[1] == len(task_joints)
+
+
+@pytest.mark.slow
+def test_g1_29dof_runs_the_dag_and_its_mjlab_export_moves_waist_and_wrists(artifacts: Path, tmp_path: Path) -> None:
+    """The 29-DoF G1 is only a robot config and its model: the smoke DAG runs, and its mjlab npz
+    carries the waist roll/pitch and wrist pitch/yaw angles the 23-DoF G1 writes as 0."""
+    run = cli("run", "--robot", "g1_29dof", "--motion", "dance1_subject2", "--profile", "smoke")
+    assert run.returncode == 0, run.stderr
+    (validate,) = (artifacts / "validate" / "g1_29dof" / "dance1_subject2").iterdir()
+    assert (validate / "report.json").is_file()
+    out = tmp_path / "g1_29dof.npz"
+    exported = cli(
+        "export-motion", "--robot", "g1_29dof", "--motion", "dance1_subject2", "--format", "mjlab", "--out", str(out)
+    )
+    assert exported.returncode == 0, exported.stderr
+    assert "lacks" not in exported.stderr
+    with np.load(out) as motion:
+        names = list(motion["joint_names"])
+        for joint in ("waist_roll_joint", "waist_pitch_joint", "left_wrist_pitch_joint", "right_wrist_yaw_joint"):
+            assert np.abs(motion["joint_pos"][:, names.index(joint)]).max() > 0.1, joint

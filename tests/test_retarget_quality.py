@@ -17,6 +17,7 @@ from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_t
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.retarget.quality import FootMeshes, QualityThresholds, quality_series, retarget_quality
 from rd_pipeline.robots import Robot, load_robot
+from rd_pipeline.robots.config import available_robots
 from rd_pipeline.robots.hulls import BodyHulls
 from rd_pipeline.robots.model import collision_geoms
 
@@ -216,7 +217,7 @@ def _exact_lowest_z(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> fl
     return float(centre[2] - size[1] * abs(axis_z) - size[0] * np.sqrt(max(0.0, 1.0 - axis_z**2)))
 
 
-@pytest.mark.parametrize("name", ["g1", "h1", "h1_2"])
+@pytest.mark.parametrize("name", available_robots())
 def test_body_hulls_match_posed_geometry(name: str) -> None:
     """Support points give each body's lowest collision point within 1 mm, on random tumbling poses
     (cylinders are sampled on their rims; meshes and spheres are exact)."""

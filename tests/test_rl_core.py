@@ -19,6 +19,7 @@ from rd_pipeline.rl.rewards import GROUPS, AdaptiveSigma, RewardManager, Rewards
 from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.rl.terminations import TerminationContext, TerminationsConfig
 from rd_pipeline.robots import load_robot
+from rd_pipeline.robots.config import available_robots
 
 N, B, P = 3, 5, 4
 
@@ -175,7 +176,7 @@ def test_multi_head_gae_is_per_head_gae() -> None:
 
 
 PRESET_RESIDUAL_JOINTS = {
-    # Policy joints with residual semantics per preset: G1 (23 policy joints), H1 (19), H1-2 (21).
+    # Policy joints with residual semantics per preset: G1 (23 policy joints), G1 29-DoF (29), H1 (19), H1-2 (21).
     "g1": {
         "absolute": 0,
         "selective": 4,
@@ -183,6 +184,15 @@ PRESET_RESIDUAL_JOINTS = {
         "all_legs": 12,
         "legs_torso": 13,
         "all": 23,
+        "reference_locked": 4,
+    },
+    "g1_29dof": {
+        "absolute": 0,
+        "selective": 4,
+        "hip_knee_ankle": 8,
+        "all_legs": 12,
+        "legs_torso": 15,
+        "all": 29,
         "reference_locked": 4,
     },
     "h1": {
@@ -206,7 +216,7 @@ PRESET_RESIDUAL_JOINTS = {
 }
 
 
-@pytest.mark.parametrize("robot_name", ["g1", "h1", "h1_2"])
+@pytest.mark.parametrize("robot_name", available_robots())
 def test_every_preset_forms_residual_and_absolute_targets_per_joint(robot_name: str) -> None:
     robot = load_robot(robot_name)
     config = robot.config

@@ -13,9 +13,10 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.robots import load_pinocchio_model, load_robot, load_robot_config
 from rd_pipeline.robots.model import check_against_model
 
-EXPECTED = {"g1": (23, 23), "h1": (19, 19), "h1_2": (27, 21)}
+EXPECTED = {"g1": (23, 23), "g1_29dof": (29, 29), "h1": (19, 19), "h1_2": (27, 21)}
 RESIDUAL_JOINTS = {
     "g1": ["left_hip_pitch_joint", "left_knee_joint", "right_hip_pitch_joint", "right_knee_joint"],
+    "g1_29dof": ["left_hip_pitch_joint", "left_knee_joint", "right_hip_pitch_joint", "right_knee_joint"],
     "h1": ["left_hip_pitch_joint", "left_knee_joint", "right_hip_pitch_joint", "right_knee_joint"],
     "h1_2": ["left_hip_pitch_joint", "left_knee_joint", "right_hip_pitch_joint", "right_knee_joint"],
 }
@@ -102,7 +103,7 @@ def test_uncovered_joint_pattern_is_named(tmp_path: Path) -> None:
 
 
 def test_unknown_robot() -> None:
-    with pytest.raises(PipelineError, match=r"unknown robot 'g2'.*available: g1, h1, h1_2"):
+    with pytest.raises(PipelineError, match=r"unknown robot 'g2'.*available: g1, g1_29dof, h1, h1_2"):
         load_robot_config("g2")
 
 

@@ -254,11 +254,12 @@ def fetch_lafan(cmd: FetchLafan, console: Console) -> int:
 
 
 def robots(cmd: Robots, console: Console) -> int:
-    for name in available_robots():
+    names = available_robots()
+    width = max(len(name) for name in names)
+    for name in names:
         config = load_robot_config(name)
-        print(
-            f"{name:<6} {len(config.joint_names):>2} joints, {len(config.policy_joints):>2} policy  {config.description}"
-        )
+        joints = f"{len(config.joint_names):>2} joints, {len(config.policy_joints):>2} policy"
+        print(f"{name:<{width}} {joints}  {config.description}")
     return 0
 
 
