@@ -19,7 +19,7 @@ ROBOT_CONFIG_DIR = Path(robot_configs.__file__).parent
 
 SETTINGS_FILE = "rd-pipeline.toml"
 """Where a checkout records its data folders (`[data]`: `lafan_dir`, `retargeted_dir`,
-`robot_assets`, `artifacts`); found in the working directory or the nearest folder above it.
+`robot_assets`, `robot_configs`, `artifacts`); found in the working directory or the nearest folder above it.
 `scripts/quickstart.sh` writes one when it finds the data; the `RD_*` variables override it."""
 
 
@@ -72,6 +72,12 @@ def robot_assets_dir() -> Path | None:
     """A folder laid out like unitree_ros `robots/` (`RD_ROBOT_ASSETS`, else `robot_assets` of
     `rd-pipeline.toml`); None: the `robot_descriptions` clone."""
     return _folder("RD_ROBOT_ASSETS", "robot_assets", None)
+
+
+def robot_configs_dir() -> Path | None:
+    """A folder of robot TOMLs of the user's own (`RD_ROBOT_CONFIGS`, else `robot_configs` of
+    `rd-pipeline.toml`); a name there takes precedence over the configs shipped in `robots/`."""
+    return _folder("RD_ROBOT_CONFIGS", "robot_configs", None)
 
 
 def artifacts_dir() -> Path:

@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import LAFAN_DIR, PROJECT, ROBOT_ASSETS
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.robots import load_pinocchio_model, load_robot, load_robot_config
+from rd_pipeline.motion.bvh import read_bvh
+from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
+from rd_pipeline.retarget.config import RetargetConfig
+from rd_pipeline.retarget.retarget import retarget
+from rd_pipeline.robots import available_robots, load_pinocchio_model, load_robot, load_robot_config
 from rd_pipeline.robots.model import check_against_model
 
 EXPECTED = {"g1": (23, 23), "g1_29dof": (29, 29), "h1": (19, 19), "h1_2": (27, 21)}
@@ -113,3 +119,33 @@ def test_assets_resolve_from_variable(tmp_path: Path, monkeypatch: pytest.Monkey
 
     with pytest.raises(PipelineError, match=r"g1_description/g1_23dof.xml: robot model file not found"):
         asset_path("g1_description/g1_23dof.xml")
+
+
+def test_a_robot_the_toolkit_has_never_seen_is_a_config_and_a_model(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """H1 with every joint renamed (`*_joint` -> `*_hinge`), its model and config in a folder of the
+    user's: it loads from RD_ROBOT_CONFIGS and retargets a shared take exactly as H1 does."""
+    original = ROBOT_ASSETS / "h1_description" / "mjcf" / "h1.xml"
+    meshes = original.parent.parent / "meshes"
+    model = tmp_path / "biped.xml"
+    xml = original.read_text().replace('meshdir="../meshes"', f'meshdir="{meshes}"')
+    model.write_text(xml.replace('_joint"', '_hinge"'))
+    config = (PROJECT / "robots" / "h1.toml").read_text().replace('_joint"', '_hinge"')
+    config = config.replace('name = "h1"', 'name = "biped"').replace(
+        'mjcf = "h1_description/mjcf/h1.xml"', f'mjcf = "{model}"'
+    )
+    configs = tmp_path / "robots"
+    configs.mkdir()
+    (configs / "biped.toml").write_text(config)
+    monkeypatch.setenv("RD_ROBOT_CONFIGS", str(configs))
+    assert "biped" in available_robots() and "h1" in available_robots()
+    biped = load_robot("biped")
+    assert biped.config.joint_names[3] == "left_knee_hinge"
+    assert biped.config.kp[3] == load_robot("h1").config.kp[3]  # patterns renamed with the joints
+    human = human_motion_from_bvh(read_bvh(LAFAN_DIR / "dance1_subject2.bvh"), LAFAN_CM_TO_M, LAFAN_TO_Z_UP)
+    excerpt = dataclasses.replace(human, pos_w=human.pos_w[300:450], quat_w=human.quat_w[300:450])  # 10-15 s
+    ours = retarget(excerpt, biped, RetargetConfig()).reference
+    theirs = retarget(excerpt, load_robot("h1"), RetargetConfig()).reference
+    assert ours.joint_names == tuple(name.replace("_joint", "_hinge") for name in theirs.joint_names)
+    assert np.array_equal(ours.joint_pos, theirs.joint_pos) and np.array_equal(ours.root_pos, theirs.root_pos)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rd_pipeline import paths
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.paths import ROBOT_CONFIG_DIR
 
@@ -69,12 +70,22 @@ class RobotConfig:
         return np.array([self.joint_names.index(j) for j in self.policy_joints], dtype=np.int64)
 
 
+def _config_dirs() -> list[Path]:
+    """Where robot TOMLs are looked for: the user's folder (if any) first, then `robots/`."""
+    user = paths.robot_configs_dir()
+    return [user, ROBOT_CONFIG_DIR] if user is not None else [ROBOT_CONFIG_DIR]
+
+
 def config_path(name: str) -> Path:
+    """The TOML of robot `name`: the user's folder first, then the shipped configs."""
+    for folder in _config_dirs():
+        if (folder / f"{name}.toml").is_file():
+            return folder / f"{name}.toml"
     return ROBOT_CONFIG_DIR / f"{name}.toml"
 
 
 def available_robots() -> list[str]:
-    return sorted(p.stem for p in ROBOT_CONFIG_DIR.glob("*.toml"))
+    return sorted({path.stem for folder in _config_dirs() for path in folder.glob("*.toml")})
 
 
 def load_robot_config(name: str, path: Path | None = None) -> RobotConfig:
