@@ -49,7 +49,7 @@ def test_deploy_observations_equal_the_training_environment(robot_name: str, mot
     config = nominal(EnvConfig(), 4)
     config = dataclasses.replace(config, actions=dataclasses.replace(config.actions, mode=mode))
     robot, reference, env = _env(robot_name, motion, config)
-    spec = build_policy_spec(robot, dataclasses.asdict(config), env.num_actions, "import", "k", (0, reference.n_frames))
+    spec = build_policy_spec(robot, config, env.num_actions, "import", "k", (0, reference.n_frames))
     model = env.backend.models[0]
     deploy = DeployController(spec, model, reference, env.num_envs)
     starts = torch.tensor([0, 37, 150, 420])
@@ -102,7 +102,7 @@ def test_exported_module_matches_the_training_actor(tmp_path: Path) -> None:
 
 def test_policy_json_names_the_missing_field(tmp_path: Path) -> None:
     robot = load_robot("g1")
-    spec = build_policy_spec(robot, dataclasses.asdict(EnvConfig()), 23, "retarget", "abc", (0, 500))
+    spec = build_policy_spec(robot, EnvConfig(), 23, "retarget", "abc", (0, 500))
     path = tmp_path / "policy.json"
     spec.save(path)
     loaded = load_policy_spec(path)
