@@ -35,11 +35,8 @@ def test_a_plain_install_runs_from_another_directory(tmp_path: Path) -> None:
     assert "Warning" not in install.stderr and "deprecated" not in install.stderr, install.stderr
     top = sorted(p.name for p in site.iterdir())
     assert top[:1] == ["bin"] and top[1] == "rd_pipeline" and top[2].startswith("rd_pipeline-") and len(top) == 3
-    assert sorted(p.name for p in (site / "rd_pipeline" / "robot_configs").glob("*.toml")) == [
-        "g1.toml",
-        "h1.toml",
-        "h1_2.toml",
-    ]
+    installed = sorted(p.name for p in (site / "rd_pipeline" / "robot_configs").glob("*.toml"))
+    assert installed == sorted(p.name for p in (PROJECT / "robots").glob("*.toml"))  # every shipped robot
     assert (site / "rd_pipeline" / "robot_configs" / "interop" / "mjlab.toml").is_file()
     script = "import sys, rd_pipeline; from rd_pipeline.cli import main; print(rd_pipeline.__file__); sys.exit(main(sys.argv[1:]))"
     elsewhere = tmp_path / "elsewhere"
