@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from collections import deque
 from collections.abc import Iterable
 
@@ -11,6 +12,7 @@ import numpy as np
 from scipy.ndimage import maximum_filter1d
 from scipy.spatial.transform import Rotation
 
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.retarget.config import IkConfig, IkWeights
 from rd_pipeline.retarget.floor import FloorLimit
 from rd_pipeline.retarget.limits import FrameStepLimit
@@ -324,15 +326,42 @@ def _limits(robot: Robot, step_limit: FrameStepLimit, floor: FloorLimit, setting
     ]
     limits: list[mink.Limit] = [step_limit, floor]
     if pairs:
-        limits.append(
-            mink.CollisionAvoidanceLimit(
-                model,
-                pairs,
-                minimum_distance_from_collisions=settings.collision_margin_m,
-                collision_detection_distance=settings.collision_detection_m,
-            )
+        avoidance = mink.CollisionAvoidanceLimit(
+            _colliding_copy(model, pairs),
+            pairs,
+            minimum_distance_from_collisions=settings.collision_margin_m,
+            collision_detection_distance=settings.collision_detection_m,
         )
+        _require_same_pairs(robot, avoidance)
+        limits.append(avoidance)
     return limits
+
+
+def _require_same_pairs(robot: Robot, avoidance: mink.CollisionAvoidanceLimit) -> None:
+    """The QP must avoid every geom pair the step check counts; mink also skips bodies welded
+    together or parent and child, which a robot config should not pair."""
+    checked = {tuple(sorted(pair)) for pair in collision_geom_pairs(robot).tolist()}
+    avoided = {tuple(sorted(pair)) for pair in avoidance.geom_id_pairs}
+    if checked != avoided:
+        first, second = sorted(checked - avoided)[0]
+        model = robot.model
+        bodies = (model.body(model.geom_bodyid[first]).name, model.body(model.geom_bodyid[second]).name)
+        raise PipelineError(
+            f"{robot.config.source}: collision pair {bodies} cannot be kept apart by the IK "
+            "(welded, or parent and child); remove it from [collision] pairs"
+        )
+
+
+def _colliding_copy(model: mujoco.MjModel, pairs: list[tuple[list[int], list[int]]]) -> mujoco.MjModel:
+    """`model` with every geom of the configured pairs marked as colliding, for the QP's collision
+    limit. mink drops pairs that fail MuJoCo's contype/conaffinity test, and some hands are visual
+    geoms only (H1-2's wrists) that the step check (`_pair_depth`) counts all the same: the QP then
+    steers a wrist into the torso and the step check refuses every step after, freezing the pose."""
+    marked = copy.deepcopy(model)
+    for geom in {g for first, second in pairs for g in (*first, *second)}:
+        marked.geom_contype[geom] |= 1
+        marked.geom_conaffinity[geom] |= 1
+    return marked
 
 
 def _root_step_budget(targets: RetargetTargets, root_body: str, settings: IkConfig) -> np.ndarray:
