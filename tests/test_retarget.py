@@ -17,11 +17,11 @@ from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.contact import contact_runs
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.retarget.config import RetargetConfig
-from rd_pipeline.retarget.ik import _colliding_copy, _require_same_pairs
+from rd_pipeline.retarget.ik import _colliding_copy, _require_same_pairs, pair_geoms
 from rd_pipeline.retarget.quality import retarget_quality
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.robots import available_robots, load_robot
-from rd_pipeline.robots.model import collision_geom_pairs, collision_geoms
+from rd_pipeline.robots.model import collision_geom_pairs
 
 SPEC_QUALITY_KEYS = {
     "fps_frames_per_s",
@@ -204,10 +204,7 @@ def test_the_ik_avoids_every_pair_its_step_check_counts(name: str) -> None:
     on ground2_subject3 at 55 s, and the step check then refused every step for two minutes."""
     robot = load_robot(name)
     model = robot.model
-    pairs = [
-        (collision_geoms(model, robot.body_ids[a]), collision_geoms(model, robot.body_ids[b]))
-        for a, b in robot.config.collision_pairs
-    ]
+    pairs = pair_geoms(robot)
     checked = {tuple(sorted(pair)) for pair in collision_geom_pairs(robot).tolist()}
     marked = mink.CollisionAvoidanceLimit(_colliding_copy(model, pairs), pairs)
     assert {tuple(sorted(pair)) for pair in marked.geom_id_pairs} == checked

@@ -16,6 +16,7 @@ import dataclasses
 import json
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -55,7 +56,12 @@ class Plan:
 
     def stages(self) -> list[PlannedStage]:
         """Every stage of the chain with its typed params and key, in run order."""
-        return self.pipeline.plan(self.pipeline.chain())
+        return list(self._planned)
+
+    @cached_property
+    def _planned(self) -> tuple[PlannedStage, ...]:
+        # Keys hash every input file: planned once per plan, not once per artifact looked up.
+        return tuple(self.pipeline.plan(self.pipeline.chain()))
 
     def stage(self, name: str) -> PlannedStage:
         """One planned stage by name."""

@@ -239,7 +239,8 @@ def _usable_artifacts(
     for entry in reversed(planned):  # a stage recomputed after all loads its own upstream in turn
         name = entry.stage.name
         loaded = any(name in later.upstream and later.stage.name not in found for later in planned)
-        if name in found and loaded and not _whole(found[name], True, console):
+        hashed = entry.stage in selected  # the first pass hashed it already
+        if name in found and loaded and not hashed and not _whole(found[name], True, console):
             del found[name]
     return found
 

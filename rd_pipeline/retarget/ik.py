@@ -320,10 +320,7 @@ def _swing_floor_raise(
 def _limits(robot: Robot, step_limit: FrameStepLimit, floor: FloorLimit, settings: IkConfig) -> list[mink.Limit]:
     """The frame step and the floor, and collision avoidance between the config's body pairs."""
     model = robot.model
-    pairs = [
-        (collision_geoms(model, robot.body_ids[a]), collision_geoms(model, robot.body_ids[b]))
-        for a, b in robot.config.collision_pairs
-    ]
+    pairs = pair_geoms(robot)
     limits: list[mink.Limit] = [step_limit, floor]
     if pairs:
         avoidance = mink.CollisionAvoidanceLimit(
@@ -335,6 +332,15 @@ def _limits(robot: Robot, step_limit: FrameStepLimit, floor: FloorLimit, setting
         _require_same_pairs(robot, avoidance)
         limits.append(avoidance)
     return limits
+
+
+def pair_geoms(robot: Robot) -> list[tuple[list[int], list[int]]]:
+    """The geoms of each body pair of the config, as mink's collision limit takes them."""
+    model = robot.model
+    return [
+        (collision_geoms(model, robot.body_ids[a]), collision_geoms(model, robot.body_ids[b]))
+        for a, b in robot.config.collision_pairs
+    ]
 
 
 def _require_same_pairs(robot: Robot, avoidance: mink.CollisionAvoidanceLimit) -> None:

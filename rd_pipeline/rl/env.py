@@ -54,7 +54,6 @@ class TrackingEnv:
         self.config = config
         self.num_envs = config.num_envs
         self.rng = np.random.default_rng(seed)
-        self.max_episode_length = reference.n_frames
         self.step_dt = config.physics_dt * config.decimation
         self.control_hz = 1.0 / self.step_dt
         # One reference frame per control step: a reference at another rate would play too fast or slow.
@@ -79,6 +78,11 @@ class TrackingEnv:
         self._build_terms(tracked)
         self._build_buffers()
         self.reset(torch.arange(self.num_envs))  # every history starts full of its first frame
+
+    @property
+    def max_episode_length(self) -> int:
+        """Frames of the reference: an episode ends at its last one."""
+        return self.command.n_frames
 
     def tensor(self, values: object, dtype: torch.dtype = DTYPE) -> torch.Tensor:
         """`values` as a tensor on the simulation's device."""
