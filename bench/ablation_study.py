@@ -162,7 +162,7 @@ def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
         **{m: report["fixed_grid"][m] for m in SPECS[args.study].columns[1:]},
         "checkpoint": json.loads((export / MANIFEST).read_text())["metrics"]["checkpoint_iteration"],
         "wall_min": round(training_seconds(train) / 60, 2),
-        "samples": params["iterations"] * params["env"]["num_envs"] * params["ppo"]["steps_per_env"],
+        "samples": params["iterations"] * params["ranks"] * params["env"]["num_envs"] * params["ppo"]["steps_per_env"],
         "train_key": manifest["key"],
         "train_folder": str(train),
     }
@@ -184,10 +184,10 @@ def seed_result(trial: Trial, args: argparse.Namespace) -> dict | None:
 
 
 def final_failure_ema(train: Path) -> list[float]:
-    """The sampler's per-segment failure EMA at the last checkpoint: what the failure prior weighed."""
+    """Rank 0's per-segment failure EMA at the last checkpoint: what its failure prior weighed."""
     last = list(checkpoints_by_iteration(train).values())[-1]
     state = torch.load(last, map_location="cpu", weights_only=False)
-    return [round(float(rate), 3) for rate in state["sampler"]["failure_rate"]]
+    return [round(float(rate), 3) for rate in state["ranks"][0]["sampler"]["failure_rate"]]
 
 
 def summary(args: argparse.Namespace) -> dict:

@@ -1,8 +1,9 @@
 """Benchmark: training throughput of the old path (mesh collision, one `mj_step` call per environment
-from Python threads) against the new default (fitted primitives, batched `mujoco.rollout`), in one
-run, interleaved.
+from Python threads, 500 Hz), the `cpu` profile's path (fitted primitives, batched `mujoco.rollout`,
+500 Hz), and the fast path (the same at mjlab's 200 Hz with Newton 10/20, alone and as `--ranks`
+data-parallel processes), in one run, interleaved.
 
-    python bench/env_throughput.py [--robot g1] [--envs 128] [--threads 2] [--repeats 5]
+    python bench/env_throughput.py [--robot g1] [--envs 128] [--threads 2] [--repeats 5] [--ranks 2]
         [--out bench/results/env_throughput.json]
 
 For each path: env physics steps/s with a zero policy (env steps x decimation); raw batched
@@ -13,7 +14,10 @@ stepping of the same models from the same states (for the new path, the env's ow
 update, as the trainer does); and CPU memory per environment (resident-set growth of building the
 path's environments, divided by their number). Medians over `--repeats` blocks; the paths
 alternate block by block so both see the same machine. The last line reads
-`speedup=<new PPO samples/s / old> physics_ratio=<new env physics / new raw batched stepping>`.
+`speedup=<fastest PPO samples/s / old> physics_ratio=<its env physics / its raw batched stepping>`.
+The ranks path is real training (`rd_pipeline.rl.launch`, `--envs` split over the ranks, the same
+total batch): its PPO samples/s is the median of the training log's iterations after the first,
+one launch per block; its physics figures are those of the single-process fast path.
 With `--paths warp` the MuJoCo Warp backend is measured alone (`--device cuda` on a GPU).
 """
 
@@ -23,6 +27,7 @@ import argparse
 import json
 import resource
 import statistics
+import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -36,17 +41,24 @@ from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig
+from rd_pipeline.rl.launch import train_in_processes
 from rd_pipeline.rl.physics.rollout import CONTROL
 from rd_pipeline.rl.ppo import build_ppo
 from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
+from rd_pipeline.rl.runner import Segments, TrainingJob
+from rd_pipeline.rl.training_config import TrainConfig
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
 from rd_pipeline.sampling.segments import segment_bounds
 
+FAST = {"physics_dt": 0.005, "decimation": 4, "solver_iterations": 10, "ls_iterations": 20}
+"""mjlab's tracking task: 200 Hz physics, Newton with 10 iterations and 20 line-search steps."""
+
 PATHS = {
     "old": {"backend": "cpu", "collision": "mesh"},
     "new": {"backend": "rollout", "collision": "primitive"},
+    "fast": {"backend": "rollout", "collision": "primitive", **FAST},
     "warp": {"backend": "warp", "collision": "primitive"},
 }
 
@@ -58,7 +70,8 @@ def main() -> None:
     parser.add_argument("--envs", type=int, default=128)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--paths", nargs="+", default=["old", "new"], choices=list(PATHS))
+    parser.add_argument("--paths", nargs="+", default=["old", "new", "fast"], choices=list(PATHS))
+    parser.add_argument("--ranks", type=int, default=2, help="processes of the ranks path (0: skip it)")
     parser.add_argument("--device", default="cpu", help="torch device for the warp path: cpu or cuda")
     parser.add_argument("--out", type=Path, default=Path("bench/results/env_throughput.json"))
     args = parser.parse_args()
@@ -81,12 +94,17 @@ def main() -> None:
         name: build_ppo(env.get_observations(), args.envs, env.num_actions, len(GROUPS), PpoConfig(), env.config.device)
         for name, env in envs.items()
     }
+    ranked = args.ranks > 1 and "fast" in envs
+    if ranked:
+        rates["fast_ranks"] = {"ppo": []}
     for _ in range(args.repeats):
         for name, env in envs.items():
             rate, calls = _env_rate(env)
             rates[name]["env"].append(rate)
             rates[name]["raw"].append(_raw_rate(env, args.threads, calls))
             rates[name]["ppo"].append(_ppo_rate(env, ppos[name]))
+        if ranked:
+            rates["fast_ranks"]["ppo"].append(_ranks_rate(robot, reference, args))
     result = {
         "robot": args.robot,
         "motion": args.motion,
@@ -95,8 +113,8 @@ def main() -> None:
         "repeats": args.repeats,
         "paths": {},
     }
-    for name, measured in rates.items():
-        env = envs[name]
+    for name, env in envs.items():
+        measured = rates[name]
         result["paths"][name] = {
             **PATHS[name],
             "cpu_memory_mb_per_env": round(memory_mb[name], 2),
@@ -106,13 +124,26 @@ def main() -> None:
             "samples": {key: [round(v) for v in values] for key, values in measured.items()},
         }
         env.close()
+    if ranked:
+        measured = rates["fast_ranks"]["ppo"]
+        result["paths"]["fast_ranks"] = {
+            **PATHS["fast"],
+            "ranks": args.ranks,
+            "envs_per_rank": args.envs // args.ranks,
+            "threads_per_rank": max(1, args.threads // args.ranks),
+            "ppo_samples_per_s_including_update": round(statistics.median(measured), 1),
+            "samples": {"ppo": [round(v) for v in measured]},
+        }
     line = ""
-    if "old" in rates and "new" in rates:
-        new = result["paths"]["new"]
-        speedup = (
-            new["ppo_samples_per_s_including_update"] / result["paths"]["old"]["ppo_samples_per_s_including_update"]
+    if "old" in rates and "fast" in envs:
+        old = result["paths"]["old"]["ppo_samples_per_s_including_update"]
+        fastest = max(
+            (path for name, path in result["paths"].items() if name.startswith("fast")),
+            key=lambda path: path["ppo_samples_per_s_including_update"],
         )
-        ratio = new["env_physics_steps_per_s"] / new["raw_batched_steps_per_s"]
+        physics = result["paths"]["fast"]
+        speedup = fastest["ppo_samples_per_s_including_update"] / old
+        ratio = physics["env_physics_steps_per_s"] / physics["raw_batched_steps_per_s"]
         result["speedup"] = round(speedup, 2)
         result["physics_ratio"] = round(ratio, 3)
         line = f"speedup={speedup:.2f} physics_ratio={ratio:.3f}"
@@ -235,6 +266,22 @@ def _ppo_rate(env: TrackingEnv, ppo, iterations: int = 2) -> float:
         torch.set_num_threads(cores)
         ppo.update()
     return iterations * ppo.storage.num_transitions_per_env * env.num_envs / (time.perf_counter() - began)
+
+
+def _ranks_rate(robot, reference, args: argparse.Namespace, iterations: int = 4) -> float:
+    """PPO samples/s of a real data-parallel training of the fast path: `args.ranks` processes
+    sharing `args.envs` environments; the median of its logged iterations after the first."""
+    starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
+    env = EnvConfig(num_envs=args.envs // args.ranks, threads=args.threads, **PATHS["fast"])
+    config = TrainConfig(
+        iterations=iterations, checkpoint_every=iterations, scoring_starts=1, ranks=args.ranks, env=env
+    )
+    rows: list[dict] = []
+    with tempfile.TemporaryDirectory() as folder:
+        segments = Segments(starts, lengths, np.zeros(len(starts)))
+        job = TrainingJob(robot, reference, segments, config, Path(folder) / "work", None)
+        train_in_processes(job, rows.append)
+    return statistics.median(row["samples_per_s"] for row in rows[1:])
 
 
 def _rss_mb() -> float:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -52,6 +53,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--set", nargs="*", default=[], help="further overrides")
     parser.add_argument("--out", type=Path, default=Path("bench/results/learning_30s"))
+    parser.add_argument("--commit", default=None, help="the commit the code ran (default: git's HEAD here)")
     args = parser.parse_args()
     sets = (f"train.clip={args.clip}", f"train.iterations={args.iterations}", *args.set)
     try:
@@ -89,7 +91,13 @@ def main() -> None:
         "final_checkpoint_training_model_start_zero_s": trained["final_start_zero_s"],
         "wall_min": round(training_seconds(train) / 60, 2),
         "wall_min_per_run": {key: round(seconds / 60, 2) for key, seconds in training_runs(train)},
-        "samples": params["iterations"] * params["env"]["num_envs"] * params["ppo"]["steps_per_env"],
+        "samples": trained["samples"],
+        "commit": args.commit or _head_commit(),
+        "physics_dt": params["env"]["physics_dt"],
+        "decimation": params["env"]["decimation"],
+        "solver_iterations": params["env"]["solver_iterations"],
+        "ls_iterations": params["env"]["ls_iterations"],
+        "ranks": params["ranks"],
         "action_mode": params["env"]["actions"]["mode"],
         "sampler": params["sampler"]["mode"],
         "train_key": manifest["key"],
@@ -112,6 +120,14 @@ def main() -> None:
     ):
         shutil.copyfile(source, args.out.parent / f"{args.out.name}{suffix}")
     print(json.dumps(result, indent=2))
+
+
+def _head_commit() -> str:
+    """The checkout's commit, when this runs from one."""
+    git = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent
+    )
+    return git.stdout.strip() or "unknown"
 
 
 if __name__ == "__main__":

@@ -22,9 +22,18 @@ PROFILE_FILE = "sampler_profile.png"
 
 def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
-    from rd_pipeline.rl.runner import Segments, TrainingRunner, clip_segments, continued_from, training_metrics
+    from rd_pipeline.rl.launch import train_in_processes
+    from rd_pipeline.rl.runner import (
+        Segments,
+        TrainingJob,
+        clip_segments,
+        continued_from,
+        run_job,
+        starting_checkpoint,
+        training_metrics,
+    )
     from rd_pipeline.rl.trainer import plot_learning_curve
-    from rd_pipeline.rl.training_log import best_scored
+    from rd_pipeline.rl.training_log import best_scored, checkpoint_iteration, read_training_log
     from rd_pipeline.robots import load_robot
     from rd_pipeline.sampling.plots import plot_sampler_profile
     from rd_pipeline.sampling.prior import PRIOR_FILE
@@ -36,34 +45,34 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         segments = Segments(prior["starts"], prior["lengths"], prior["weights"])
     warn = lambda message: ctx.console.print(f"[yellow]warning:[/] {escape(message)}", highlight=False)
     start, end = clip_frames(config.clip, reference.fps, reference.n_frames, warn)
-    runner = TrainingRunner(robot, reference.frames(start, end), clip_segments(segments, start, end), config)
     # Checkpoints and the log live in the work folder, which survives an interruption.
     work = ctx.work_dir or ctx.out_dir
     shorter = _longest_shorter_run(ctx.shorter, config.iterations) if ctx.resume else None
     say = lambda line: ctx.console.print(line, markup=False, highlight=False)
-    first = runner.prepare(work, ctx.restart, shorter, say)
+    checkpoint = starting_checkpoint(work, ctx.restart, shorter, say)
+    job = TrainingJob(
+        robot, reference.frames(start, end), clip_segments(segments, start, end), config, work, checkpoint
+    )
+    first = checkpoint_iteration(checkpoint) if checkpoint else 0
     with ctx.progress(config.iterations, f"PPO {ctx.robot}", done=first) as advance:
-        rows = runner.learn(
-            work,
-            first,
-            lambda row: advance(f"reward {row['reward']:.2f}  episode {row['episode_length_s'] or 0:.2f} s"),
-        )
-    runner.close()
+        status = lambda row: advance(f"reward {row['reward']:.2f}  episode {row['episode_length_s'] or 0:.2f} s")
+        if config.ranks > 1:
+            outcome = train_in_processes(job, status)
+        else:
+            outcome = run_job(job, status)
+    rows = read_training_log(work)
     if work != ctx.out_dir:
         for item in work.iterdir():
             shutil.move(str(item), ctx.out_dir / item.name)
         work.rmdir()
     plot_learning_curve(rows, ctx.out_dir / CURVE_FILE)
-    sampler = runner.sampler
-    uniform = 1 / sampler.n_segments
-    plot_sampler_profile(
-        sampler.failure_rate.numpy(), sampler.probabilities().numpy(), uniform, ctx.out_dir / PROFILE_FILE
-    )
+    uniform = 1 / len(outcome.failure_rate)
+    plot_sampler_profile(outcome.failure_rate, outcome.probabilities, uniform, ctx.out_dir / PROFILE_FILE)
     # The last iteration is always a scored checkpoint, so there is a best one.
     best = best_scored(rows)
     assert best is not None
     return {
-        **training_metrics(rows, runner, best),
+        **training_metrics(rows, outcome, config, best),
         "continued_from": continued_from(ctx.out_dir),
         "clip_frames": [start, end],
     }
@@ -82,7 +91,7 @@ def _longest_shorter_run(runs: tuple[ArtifactRef, ...], iterations: int) -> Shor
 
 STAGE = Stage(
     name="train",
-    version=4,
+    version=5,
     description="reference + prior -> residual-action PPO policy (multi-head critic, segment sampler)",
     params=TrainConfig,
     provides="policy",

@@ -57,22 +57,42 @@ def cli(*args: str, env: dict[str, str] | None = None, cwd: Path | None = None) 
     )
 
 
+def h1_2_dance_reference():
+    """H1-2 dance2_subject4 from the dataset CSV, resampled to 50 fps."""
+    from rd_pipeline.motion.contact import ContactThresholds
+    from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+    from rd_pipeline.robots import load_robot
+
+    robot = load_robot("h1_2")
+    path = RETARGETED_DIR / "h1_2" / "dance2_subject4.csv"
+    return import_retargeted_csv(path, robot, 30.0, 50.0, "cubic", ContactThresholds()).reference
+
+
 def h1_2_dance_env(config, seed: int = 3, sampler_config=None):
     """A tracking environment on H1-2 dance2_subject4 (dataset CSV), one-second segments, the
     sampler of `sampler_config` (the default one when not given) on a flat balanced prior."""
     import torch
 
-    from rd_pipeline.motion.contact import ContactThresholds
-    from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
     from rd_pipeline.rl.env import TrackingEnv
     from rd_pipeline.robots import load_robot
     from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
     from rd_pipeline.sampling.segments import segment_bounds
 
-    robot = load_robot("h1_2")
-    reference = import_retargeted_csv(
-        RETARGETED_DIR / "h1_2" / "dance2_subject4.csv", robot, 30.0, 50.0, "cubic", ContactThresholds()
-    ).reference
+    reference = h1_2_dance_reference()
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
     sampler = SegmentSampler(sampler_config or SamplerConfig(), torch.ones(len(starts)), seed=seed)
-    return TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=seed)
+    return TrackingEnv(load_robot("h1_2"), reference, sampler, starts, lengths, config, seed=seed)
+
+
+def h1_2_dance_job(config, work: Path, checkpoint: Path | None = None):
+    """A training job on the first 10 s of H1-2 dance2_subject4, one-second segments, flat prior."""
+    import numpy as np
+
+    from rd_pipeline.rl.runner import Segments, TrainingJob
+    from rd_pipeline.robots import load_robot
+    from rd_pipeline.sampling.segments import segment_bounds
+
+    reference = h1_2_dance_reference().frames(0, 500)
+    starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
+    segments = Segments(starts, lengths, np.zeros(len(starts)))
+    return TrainingJob(load_robot("h1_2"), reference, segments, config, work, checkpoint)

@@ -139,14 +139,19 @@ def test_adaptive_sigma_follows_the_error_and_never_widens() -> None:
     body[:, :, 0] += 0.01  # e = 1e-4, a quarter of the table's sigma^2 = 4e-4
     adaptive = AdaptiveSigma(alpha=0.5, table_sigmas=MANAGER.tracking_sigmas(), device=torch.device("cpu"))
     _, _, errors = compute_rewards(_state(body_pos=body), 1.0)
-    adaptive.update(errors)
+    everyone = torch.ones(N, dtype=torch.bool)
+    adaptive.update(errors, everyone)
     assert float(adaptive.sigma()["body_pos"]) == pytest.approx(math.sqrt(0.5 * 4e-4 + 0.5 * 1e-4))
     _, terms, _ = compute_rewards(_state(body_pos=body), 1.0, sigma=adaptive.sigma())
     assert terms["body_pos"][0].item() == pytest.approx(2.0 * math.exp(-1e-4 / 2.5e-4))
     body[:, :, 0] += 1.0  # far worse tracking: the kernel stays at the table width
     for _ in range(20):
-        adaptive.update(compute_rewards(_state(body_pos=body), 1.0)[2])
+        adaptive.update(compute_rewards(_state(body_pos=body), 1.0)[2], everyone)
     assert float(adaptive.sigma()["body_pos"]) == pytest.approx(0.02)
+    # Errors of worlds that are not valid (non-finite physics) move nothing.
+    before = adaptive.sigma()["body_pos"]
+    adaptive.update({name: torch.full((N,), 1e-9) for name in errors}, torch.zeros(N, dtype=torch.bool))
+    assert float(adaptive.sigma()["body_pos"]) == float(before)
 
 
 def _single_head_gae(rewards, values, dones, last, gamma, lam):

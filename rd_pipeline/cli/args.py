@@ -30,6 +30,8 @@ class PlanOptions:
     """Train on part of the motion, `START:END` in seconds (sets train.clip)."""
     backend: str | None = None
     """Physics backend for training, `rollout`, `cpu` or `warp` (sets train.env.backend)."""
+    nproc: int | None = None
+    """Training processes, data-parallel PPO launched through torchrun (sets train.ranks)."""
     set: tuple[str, ...] = ()
     """Parameter overrides, `stage.param=value`."""
     params_file: Path | None = None

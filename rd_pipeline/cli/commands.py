@@ -37,10 +37,11 @@ from rd_pipeline.robots.config import available_robots, load_robot_config
 
 
 def _assignments(cmd: PlanOptions) -> tuple[str, ...]:
-    """`--set` with the shorthands `--clip` and `--backend` spelled out."""
+    """`--set` with the shorthands `--clip`, `--backend` and `--nproc` spelled out."""
     clip = (f"train.clip={cmd.clip}",) if cmd.clip else ()
     backend = (f"train.env.backend={cmd.backend}",) if cmd.backend else ()
-    return cmd.set + clip + backend
+    ranks = (f"train.ranks={cmd.nproc}",) if cmd.nproc is not None else ()
+    return cmd.set + clip + backend + ranks
 
 
 def run(cmd: Run, console: Console) -> int:

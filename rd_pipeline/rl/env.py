@@ -29,7 +29,7 @@ from rd_pipeline.rl.physics import make_backend
 from rd_pipeline.rl.quat import rotate_inverse
 from rd_pipeline.rl.reward_terms import TermContext, TrackingState
 from rd_pipeline.rl.rewards import AdaptiveSigma, RewardManager
-from rd_pipeline.rl.sim_model import simulation_model
+from rd_pipeline.rl.sim_model import SolverBudget, simulation_model
 from rd_pipeline.rl.terminations import TerminationContext, failed
 from rd_pipeline.robots import Robot
 from rd_pipeline.sampling.sampler import SegmentSampler
@@ -92,7 +92,8 @@ class TrackingEnv:
         """The backend over one randomized model per environment; returns the nominal model."""
         config = self.config
         sensors = config.backend == "rollout"
-        base = simulation_model(self.robot, config.physics_dt, config.collision, body_sensors=sensors)
+        solver = SolverBudget(config.solver_iterations, config.ls_iterations)
+        base = simulation_model(self.robot, config.physics_dt, config.collision, sensors, solver)
         root = base.body(self.robot.config.root_body).id
         models, dr_params = events.randomized_models(base, self.num_envs, config.randomization, root, self.rng)
         self.backend = make_backend(config.backend, models, config.threads, config.device)
@@ -240,33 +241,45 @@ class TrackingEnv:
         self.action_history = torch.roll(self.action_history, 1, dims=1)
         self.action_history[:, 0] = actions
 
+        broken = self._scrub_nonfinite()
         current = self._state()
         state = self._tracking_state(current, actions, before_vel)
-        terminated = failed(state, self._termination_context())
+        terminated = failed(state, self._termination_context()) | broken
         state.terminated = terminated
-        rewards, terms, errors = self.rewards.compute(state, self.curriculum.penalty_scale, self.sigma.sigma())
-        self.sigma.update(errors)
+        rewards, _, errors = self.rewards.compute(state, self.curriculum.penalty_scale, self.sigma.sigma())
+        self.sigma.update(errors, valid=~broken)
         # Weights are per second, as in legged_gym: a step earns weight x dt. This keeps returns within
         # reach of PPO's clipped value loss (0.2 per update); at full scale the -200 termination
         # alone puts the values in the hundreds and the critic cannot follow.
-        rewards = rewards * self.step_dt
+        rewards = torch.where(broken[:, None], 0.0, rewards * self.step_dt)
         time_out = self.command.time_out()
         dones = terminated | time_out
         # The one read from the device per step (mjlab and Isaac Lab read their reset ids too).
-        flags = torch.stack([terminated, time_out]).cpu()
-        done_ids = torch.nonzero(flags.any(0)).flatten()
+        flags = torch.stack([terminated, time_out, broken]).cpu()
+        done_ids = torch.nonzero(flags[:2].any(0)).flatten()
         lengths = self.episode_length_buf[done_ids]
         self.command.record_ends(done_ids, lengths, flags[0][done_ids])
         extras = {
             "time_outs": time_out & ~terminated,
-            "log": {f"reward/{k}": v.mean() for k, v in terms.items()},
             "episode_length": lengths.float(),
+            "nonfinite": int(flags[2].sum()),
         }
         mean_length = float(lengths.float().mean()) if len(lengths) else 0.0
         curricula.update(self.curriculum, mean_length, len(lengths), self.config.curricula, self.config.terminations)
         self.obs_frames = torch.cat([self.obs_frames[:, 1:], self._actor_frame(current)[:, None]], dim=1)
         self.reset(done_ids)
         return self.get_observations(), rewards, dones, extras
+
+    def _scrub_nonfinite(self) -> torch.Tensor:
+        """(N,) True where the physics returned a non-finite value (a world that blew up). Such a
+        world fails and resets this step; its values are zeroed first, so no NaN reaches the
+        rewards, the observation normalizer or the adaptive sigmas. Finite worlds are untouched."""
+        s = self.backend.state
+        broken = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        for tensor in vars(s).values():
+            broken |= ~torch.isfinite(tensor).flatten(1).all(1)
+            torch.nan_to_num_(tensor, nan=0.0, posinf=0.0, neginf=0.0)
+        return broken
 
     def _delayed_targets(self, actions: torch.Tensor) -> torch.Tensor:
         """(N, J) PD targets of this step's actions, through each environment's control delay."""

@@ -10,6 +10,7 @@ from rsl_rl.storage import RolloutStorage
 from tensordict import TensorDict
 
 from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
+from rd_pipeline.rl.distributed import ONE_PROCESS, Ranks
 from rd_pipeline.rl.ppo_config import PpoConfig
 
 
@@ -67,8 +68,17 @@ class MultiHeadPPO(PPO):
 
 
 def build_ppo(
-    obs: TensorDict, num_envs: int, num_actions: int, heads: int, config: PpoConfig, device: str = "cpu"
+    obs: TensorDict,
+    num_envs: int,
+    num_actions: int,
+    heads: int,
+    config: PpoConfig,
+    device: str = "cpu",
+    ranks: Ranks = ONE_PROCESS,
 ) -> MultiHeadPPO:
+    """The PPO of one rank; with several ranks, rsl-rl's data-parallel scheme (gradients, the
+    adaptive learning rate's KL and the normalizers reduced over the ranks) starting from rank
+    0's weights."""
     groups = {"actor": ["policy"], "critic": ["critic"]}
     actor = MLPModel(
         obs,
@@ -82,7 +92,7 @@ def build_ppo(
     )
     critic = MLPModel(obs, groups, "critic", heads, list(config.hidden_dims), "relu", obs_normalization=True)
     storage = MultiHeadRolloutStorage(num_envs, config.steps_per_env, obs, num_actions, heads, device)
-    return MultiHeadPPO(
+    ppo = MultiHeadPPO(
         actor,
         critic,
         storage,
@@ -97,4 +107,8 @@ def build_ppo(
         max_grad_norm=config.max_grad_norm,
         desired_kl=config.desired_kl,
         device=device,
+        multi_gpu_cfg={"global_rank": ranks.rank, "world_size": ranks.world_size} if ranks.distributed else None,
     )
+    if ranks.distributed:
+        ppo.broadcast_parameters()
+    return ppo

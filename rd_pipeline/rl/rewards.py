@@ -156,9 +156,13 @@ class AdaptiveSigma:
         # 0-d float64 tensors on the training device: the EMA never waits for the device.
         self.variance = {name: torch.tensor(v, dtype=torch.float64, device=device) for name, v in self.origin.items()}
 
-    def update(self, errors: dict[str, torch.Tensor]) -> None:
+    def update(self, errors: dict[str, torch.Tensor], valid: torch.Tensor) -> None:
+        """Move each sigma towards its (N,) errors' mean over the `valid` environments."""
+        weights = valid.double() / valid.sum().clamp(min=1)
         for name, origin in self.origin.items():
-            ema = (1 - self.alpha) * self.variance[name] + self.alpha * errors[name].mean().double()
+            batch = (errors[name].double() * weights).sum()
+            ema = (1 - self.alpha) * self.variance[name] + self.alpha * batch
+            ema = torch.where(valid.any(), ema, self.variance[name])
             # fmin keeps the origin when a batch error is NaN; clamp would carry the NaN on for good.
             self.variance[name] = torch.fmin(ema, ema.new_tensor(origin))
 

@@ -1,8 +1,10 @@
 """The training runner: builds the environment and PPO from params, learns, resumes, grows, scores.
 
 Like rsl_rl's `OnPolicyRunner`, it owns the loop's surroundings: where checkpoints and the log go,
-continuing an interrupted run from its newest checkpoint, growing a finished shorter run, scoring
-every checkpoint on nominal physics. The `train` stage only loads its inputs and calls `learn`.
+which checkpoint a run starts from (an interrupted run's newest, or the end of a shorter finished
+run it grows), scoring every checkpoint on nominal physics. A `TrainingJob` is everything one
+training needs; `run_job` trains it in this process as one rank of `ranks` (`rl.launch` starts the
+ranks of a data-parallel run). The `train` stage only loads its inputs and runs the job.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import numpy as np
 import torch
 
 from rd_pipeline.motion.reference import ReferenceMotion
+from rd_pipeline.rl.distributed import ONE_PROCESS, Ranks
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal
 from rd_pipeline.rl.ppo import MultiHeadPPO, build_ppo
@@ -28,7 +31,6 @@ from rd_pipeline.rl.training_log import (
     LOG_FILE,
     checkpoint_path,
     checkpoints_by_iteration,
-    read_training_log,
 )
 from rd_pipeline.robots import Robot
 from rd_pipeline.sampling.sampler import SegmentSampler
@@ -61,17 +63,58 @@ class Segments:
     """Balanced prior w* over the segments (zeros: uniform)."""
 
 
-class TrainingRunner:
-    """The training environment, its PPO and a nominal scoring environment, built from params."""
+@dataclass(frozen=True)
+class TrainingJob:
+    """Everything one training needs; picklable, so the ranks of a data-parallel run get it too."""
 
-    def __init__(self, robot: Robot, reference: ReferenceMotion, segments: Segments, config: TrainConfig) -> None:
+    robot: Robot
+    """The robot."""
+    reference: ReferenceMotion
+    """The clip to track."""
+    segments: Segments
+    """Its segments and balanced prior."""
+    config: TrainConfig
+    """The `train` params."""
+    work: Path
+    """Where checkpoints and the log go."""
+    checkpoint: Path | None
+    """The checkpoint to continue from (None: from scratch)."""
+
+
+@dataclass(frozen=True)
+class TrainingOutcome:
+    """What a finished training reports besides its log, from rank 0's share."""
+
+    observation_size: int
+    """Actor observation width."""
+    num_actions: int
+    """Policy outputs."""
+    sampler_step: int
+    """Sampler updates made."""
+    failure_rate: np.ndarray
+    """(S,) the sampler's failure rate per segment."""
+    probabilities: np.ndarray
+    """(S,) its final sampling distribution."""
+
+
+class TrainingRunner:
+    """One rank's training environment and PPO, and on rank 0 a nominal scoring environment.
+
+    With several `ranks` (data-parallel PPO) each rank steps its own environments and sampler,
+    seeded apart, from the same initial weights."""
+
+    def __init__(self, job: TrainingJob, ranks: Ranks = ONE_PROCESS) -> None:
+        config = job.config
+        segments = job.segments
         torch.manual_seed(config.seed)
         weights = segments.weights
         balanced = torch.as_tensor(weights if weights.sum() > 0 else np.ones(len(weights)))
-        self.config = config
-        self.sampler = SegmentSampler(config.sampler, balanced, seed=config.seed)
+        seed = ranks.seed(config.seed)
+        self.job = job
+        self.ranks = ranks
+        self.sampler = SegmentSampler(config.sampler, balanced, seed=seed)
         self.env = TrackingEnv(
-            robot, reference, self.sampler, segments.starts, segments.lengths, config.env, seed=config.seed
+            job.robot, job.reference, self.sampler, segments.starts, segments.lengths, config.env, seed
         )
         self.ppo: MultiHeadPPO = build_ppo(
             self.env.get_observations(),
@@ -80,61 +123,87 @@ class TrainingRunner:
             len(GROUPS),
             config.ppo,
             config.env.device,
+            ranks,
         )
-        scoring_sampler = SegmentSampler(config.sampler, balanced, seed=config.seed)
-        self.scoring_env = TrackingEnv(
-            robot,
-            reference,
-            scoring_sampler,
-            segments.starts,
-            segments.lengths,
-            nominal(config.env, config.scoring_starts),
-            seed=config.seed,
-        )
+        self.scoring_env: TrackingEnv | None = None
+        if ranks.leader:
+            self.scoring_env = TrackingEnv(
+                job.robot,
+                job.reference,
+                SegmentSampler(config.sampler, balanced, seed=config.seed),
+                segments.starts,
+                segments.lengths,
+                nominal(config.env, config.scoring_starts),
+                seed=config.seed,
+            )
 
-    @property
-    def observation_size(self) -> int:
-        return int(self.env.get_observations()["policy"].shape[1])
-
-    def prepare(self, work: Path, restart: bool, shorter: ShorterRun | None, say: Callable[[str], None]) -> int:
-        """Make `work` ready and return the iteration to start from: the newest checkpoint an
-        interrupted run left there (unless `restart`; resuming is exact, so the result is that of an
-        uninterrupted run), else the end of `shorter` copied in (a longer run is the shorter one
-        continued, since nothing in training depends on the total), else 0 in an emptied folder."""
-        checkpoints = list(checkpoints_by_iteration(work).values())
-        if checkpoints and not restart:
-            say(f"  continuing the interrupted run from {checkpoints[-1].name} in {work} (--force starts over)")
-            return load_checkpoint(checkpoints[-1], self.ppo, self.env)
-        if work.exists():
-            shutil.rmtree(work)
-        work.mkdir(parents=True)
-        if shorter is None:
-            return 0
-        shutil.copytree(shorter.folder / CHECKPOINT_DIR, work / CHECKPOINT_DIR)
-        shutil.copy2(shorter.folder / LOG_FILE, work / LOG_FILE)
-        (work / CONTINUED_FILE).write_text(shorter.key + "\n")
-        say(f"  continuing the {shorter.iterations}-iteration run {shorter.key}")
-        return load_checkpoint(checkpoint_path(work, shorter.iterations), self.ppo, self.env)
-
-    def learn(self, work: Path, start_iteration: int, on_iteration: Callable[[dict], None]) -> list[dict]:
-        """Train from `start_iteration` to the configured iterations, checkpointing and scoring into
-        `work`; returns every row of the log, earlier runs' included."""
+    def learn(self, on_iteration: Callable[[dict], None]) -> None:
+        """Train from the job's checkpoint (or scratch) to the configured iterations, checkpointing
+        and scoring into the job's work folder."""
+        job = self.job
+        first = 0
+        if job.checkpoint is not None:
+            first = load_checkpoint(job.checkpoint, self.ppo, self.env, self.ranks)
         mean_action = lambda obs: self.ppo.actor(obs, stochastic_output=False)
+        score = None if self.scoring_env is None else checkpoint_scorer(self.scoring_env, mean_action)
         train(
             self.env,
             self.ppo,
-            self.config.iterations,
-            work,
-            self.config.checkpoint_every,
-            start_iteration=start_iteration,
+            job.config.iterations,
+            job.work,
+            job.config.checkpoint_every,
+            start_iteration=first,
             on_iteration=on_iteration,
-            score=checkpoint_scorer(self.scoring_env, mean_action),
+            score=score,
+            ranks=self.ranks,
         )
-        return read_training_log(work)
+
+    def outcome(self) -> TrainingOutcome:
+        return TrainingOutcome(
+            observation_size=int(self.env.get_observations()["policy"].shape[1]),
+            num_actions=self.env.num_actions,
+            sampler_step=self.sampler.step,
+            failure_rate=self.sampler.failure_rate.numpy(),
+            probabilities=self.sampler.probabilities().numpy(),
+        )
 
     def close(self) -> None:
         self.env.close()
-        self.scoring_env.close()
+        if self.scoring_env is not None:
+            self.scoring_env.close()
+
+
+def run_job(job: TrainingJob, on_iteration: Callable[[dict], None], ranks: Ranks = ONE_PROCESS) -> TrainingOutcome:
+    """Train `job` as one of `ranks` (the only one by default) and report rank 0's share."""
+    runner = TrainingRunner(job, ranks)
+    try:
+        runner.learn(on_iteration)
+        return runner.outcome()
+    finally:
+        runner.close()
+
+
+def starting_checkpoint(
+    work: Path, restart: bool, shorter: ShorterRun | None, say: Callable[[str], None]
+) -> Path | None:
+    """Make `work` ready and return the checkpoint to start from: the newest one an interrupted
+    run left there (unless `restart`; resuming is exact, so the result is that of an uninterrupted
+    run), else the end of `shorter` copied in (a longer run is the shorter one continued, since
+    nothing in training depends on the total), else None in an emptied folder."""
+    checkpoints = list(checkpoints_by_iteration(work).values())
+    if checkpoints and not restart:
+        say(f"  continuing the interrupted run from {checkpoints[-1].name} in {work} (--force starts over)")
+        return checkpoints[-1]
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir(parents=True)
+    if shorter is None:
+        return None
+    shutil.copytree(shorter.folder / CHECKPOINT_DIR, work / CHECKPOINT_DIR)
+    shutil.copy2(shorter.folder / LOG_FILE, work / LOG_FILE)
+    (work / CONTINUED_FILE).write_text(shorter.key + "\n")
+    say(f"  continuing the {shorter.iterations}-iteration run {shorter.key}")
+    return checkpoint_path(work, shorter.iterations)
 
 
 def clip_segments(segments: Segments, start: int, end: int) -> Segments:
@@ -149,14 +218,18 @@ def continued_from(folder: Path) -> str | None:
     return path.read_text().strip() if path.exists() else None
 
 
-def training_metrics(rows: list[dict], runner: TrainingRunner, best: dict[str, Any]) -> dict[str, Any]:
+def training_metrics(
+    rows: list[dict], outcome: TrainingOutcome, config: TrainConfig, best: dict[str, Any]
+) -> dict[str, Any]:
     """The headline figures of a finished training, for its manifest."""
     last = rows[-1]
     return {
-        "iterations": runner.config.iterations,
-        "num_envs": runner.config.env.num_envs,
-        "observation_size": runner.observation_size,
-        "num_actions": runner.env.num_actions,
+        "iterations": config.iterations,
+        "num_envs": config.env.num_envs,
+        "ranks": config.ranks,
+        "samples": config.iterations * config.samples_per_iteration,
+        "observation_size": outcome.observation_size,
+        "num_actions": outcome.num_actions,
         "final_episode_length_s": last["episode_length_s"],
         "final_reward": last["reward"],
         "final_start_zero_s": last["start_zero_s"],
@@ -164,5 +237,6 @@ def training_metrics(rows: list[dict], runner: TrainingRunner, best: dict[str, A
         "best_start_zero_s": best["start_zero_s"],
         "best_completion": best["completion"],
         "samples_per_s_median": float(np.median([r["samples_per_s"] for r in rows])),
-        "sampler_step": runner.sampler.step,
+        "nonfinite_resets": sum(r.get("nonfinite_resets", 0) for r in rows),
+        "sampler_step": outcome.sampler_step,
     }

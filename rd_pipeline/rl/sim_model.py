@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import mujoco
@@ -29,18 +30,36 @@ def pd_simulation_model(
 
 
 def simulation_model(
-    robot: Robot, timestep: float = 0.002, collision: CollisionModel = "mesh", body_sensors: bool = False
+    robot: Robot,
+    timestep: float = 0.002,
+    collision: CollisionModel = "mesh",
+    body_sensors: bool = False,
+    solver: SolverBudget | None = None,
 ) -> mujoco.MjModel:
     """The robot with the config's gains and effort limits: `mesh` collides the MJCF's geometry
     (every pair of geoms), `primitive` the fitted training shapes (see `primitive_collision`).
-    `body_sensors` adds the sensors a batched rollout reads its results from (`add_body_sensors`)."""
+    `body_sensors` adds the sensors a batched rollout reads its results from (`add_body_sensors`);
+    `solver` caps the constraint solver's work (None: MuJoCo's defaults)."""
     config = robot.config
     spec = _pd_spec(asset_path(config.mjcf), config.joint_names, config.kp, config.kd, config.effort_limit, timestep)
+    if solver is not None:
+        spec.option.iterations = solver.iterations
+        spec.option.ls_iterations = solver.ls_iterations
     if collision == "primitive":
         primitive_collision(spec, config.foot_bodies, config.collision_pairs)
     if body_sensors:
         add_body_sensors(spec)
     return spec.compile()
+
+
+@dataclass(frozen=True)
+class SolverBudget:
+    """How much work MuJoCo's constraint solver may do per physics step."""
+
+    iterations: int
+    """Solver iterations."""
+    ls_iterations: int
+    """Line-search iterations per solver iteration."""
 
 
 BODY_SENSORS = ("pos", "quat", "linvel", "angvel", "contact_force")

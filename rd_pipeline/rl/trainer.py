@@ -6,50 +6,80 @@ import json
 import os
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 import torch
 from tensordict import TensorDict
 
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.rl.distributed import ONE_PROCESS, Ranks, gather_to_leader, summed, weights_digest
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.ppo import MultiHeadPPO
 from rd_pipeline.rl.rewards import GROUPS
 from rd_pipeline.rl.training_log import LOG_FILE, best_scored, checkpoint_path
 
 
-def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, env: TrackingEnv) -> None:
+def rank_state(env: TrackingEnv) -> dict:
+    """What one rank needs, besides the shared weights, to continue exactly: its environments,
+    its sampler and its random generators."""
+    return {
+        "sampler": env.sampler.state_dict(),
+        "env": env.state_dict(),
+        "torch_rng": torch.get_rng_state(),
+        # Action noise is drawn on the training device: a CUDA run needs its generators too.
+        "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
+    }
+
+
+def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, rank_states: list[dict]) -> None:
     """Written beside its final name and renamed, so an interrupted save never leaves a torn checkpoint."""
     path.parent.mkdir(parents=True, exist_ok=True)
     partial = path.with_suffix(".partial")
-    torch.save(
-        {
-            "iteration": iteration,
-            "algorithm": ppo.save(),
-            "learning_rate": ppo.learning_rate,
-            "sampler": env.sampler.state_dict(),
-            "env": env.state_dict(),
-            "torch_rng": torch.get_rng_state(),
-            # Action noise is drawn on the training device: a CUDA run needs its generators too.
-            "cuda_rng": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
-        },
-        partial,
-    )
+    state = {
+        "iteration": iteration,
+        "algorithm": ppo.save(),
+        "learning_rate": ppo.learning_rate,
+        "ranks": rank_states,
+    }
+    torch.save(state, partial)
     os.replace(partial, path)
 
 
-def load_checkpoint(path: Path, ppo: MultiHeadPPO, env: TrackingEnv) -> int:
+def load_checkpoint(path: Path, ppo: MultiHeadPPO, env: TrackingEnv, ranks: Ranks = ONE_PROCESS) -> int:
+    """Load the shared weights and this rank's state; returns the checkpoint's iteration."""
     state = torch.load(path, weights_only=False, map_location="cpu")
+    saved = state["ranks"]
+    if len(saved) != ranks.world_size:
+        raise PipelineError(
+            f"{path}: made by {len(saved)} training processes, resumed with {ranks.world_size}; "
+            f"continue it with train.ranks={len(saved)}"
+        )
     ppo.load(state["algorithm"], None, strict=True)
     ppo.learning_rate = state["learning_rate"]
     for group in ppo.optimizer.param_groups:
         group["lr"] = ppo.learning_rate
-    env.sampler.load_state_dict(state["sampler"])
-    env.load_state_dict(state["env"])
-    torch.set_rng_state(state["torch_rng"])
-    if state.get("cuda_rng") is not None:
-        torch.cuda.set_rng_state_all(state["cuda_rng"])
+    mine = saved[ranks.rank]
+    env.sampler.load_state_dict(mine["sampler"])
+    env.load_state_dict(mine["env"])
+    torch.set_rng_state(mine["torch_rng"])
+    if mine.get("cuda_rng") is not None:
+        torch.cuda.set_rng_state_all(mine["cuda_rng"])
     return int(state["iteration"])
+
+
+@dataclass
+class Rollout:
+    """What one rollout of every environment leaves for the log."""
+
+    lengths: list[float]
+    """Lengths (steps) of the episodes that ended."""
+    rewards: torch.Tensor
+    """(steps, G) mean reward per group."""
+    nonfinite: int
+    """Worlds whose physics went non-finite (each failed and reset)."""
 
 
 def train(
@@ -61,23 +91,27 @@ def train(
     start_iteration: int = 0,
     on_iteration: Callable[[dict], None] = lambda row: None,
     score: Callable[[], dict[str, float]] | None = None,
+    ranks: Ranks = ONE_PROCESS,
 ) -> list[dict]:
     """Run PPO from `start_iteration` to `iterations`, checkpointing every `checkpoint_every` and at the end.
 
     `score`, if given, rates the policy at each checkpoint; its figures go into that iteration's log row.
+    With several `ranks`, every rank steps its own environments, rank 0 scores and writes the log
+    and the checkpoints (with every rank's state), and the others return no rows.
     Returns the logged rows of this call (the log file also holds those of earlier, resumed runs)."""
     history: list[dict] = []
-    out_dir.mkdir(parents=True, exist_ok=True)
     obs = env.get_observations()
-    _drop_rows_after(out_dir / LOG_FILE, start_iteration)
-    log = (out_dir / LOG_FILE).open("a")
+    log = _open_log(out_dir, start_iteration) if ranks.leader else None
     for iteration in range(start_iteration, iterations):
         began = time.perf_counter()
-        obs, lengths, rewards = _collect(env, ppo, obs)
+        obs, rollout = _collect(env, ppo, obs)
         losses = ppo.update()
-        row = _log_row(env, ppo, iteration + 1, time.perf_counter() - began, lengths, rewards, losses)
+        row = _log_row(env, ppo, iteration + 1, time.perf_counter() - began, rollout, losses, ranks)
         done = iteration + 1
         checkpoint = done % checkpoint_every == 0 or done == iterations
+        states = gather_to_leader(ranks, rank_state(env)) if checkpoint else []
+        if log is None:
+            continue
         if checkpoint and score is not None:
             row.update(score())
         history.append(row)
@@ -85,16 +119,23 @@ def train(
         log.flush()
         on_iteration(row)
         if checkpoint:
-            save_checkpoint(checkpoint_path(out_dir, done), done, ppo, env)
-    log.close()
+            save_checkpoint(checkpoint_path(out_dir, done), done, ppo, states)
+    if log is not None:
+        log.close()
     return history
 
 
-def _collect(env: TrackingEnv, ppo: MultiHeadPPO, obs: TensorDict) -> tuple[TensorDict, list[float], torch.Tensor]:
-    """One rollout of every environment into PPO's storage, and the returns computed: the last
-    observations, the lengths of the episodes that ended, the (steps, G) mean reward per group."""
+def _open_log(out_dir: Path, start_iteration: int) -> TextIO:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    _drop_rows_after(out_dir / LOG_FILE, start_iteration)
+    return (out_dir / LOG_FILE).open("a")
+
+
+def _collect(env: TrackingEnv, ppo: MultiHeadPPO, obs: TensorDict) -> tuple[TensorDict, Rollout]:
+    """One rollout of every environment into PPO's storage, and the returns computed."""
     lengths: list[float] = []
     rewards = []
+    nonfinite = 0
     cores = torch.get_num_threads()
     # While collecting, the physics threads want the cores: torch's idle workers would spin on
     # them between the policy's small matrix products. The update gets every core.
@@ -105,10 +146,11 @@ def _collect(env: TrackingEnv, ppo: MultiHeadPPO, obs: TensorDict) -> tuple[Tens
             obs, reward, dones, extras = env.step(actions)
             ppo.process_env_step(obs, reward, dones, extras)
             lengths += extras["episode_length"].tolist()
+            nonfinite += extras["nonfinite"]
             rewards.append(reward.mean(0))
         ppo.compute_returns(obs)
     torch.set_num_threads(cores)
-    return obs, lengths, torch.stack(rewards)
+    return obs, Rollout(lengths, torch.stack(rewards), nonfinite)
 
 
 def _log_row(
@@ -116,25 +158,34 @@ def _log_row(
     ppo: MultiHeadPPO,
     iteration: int,
     seconds: float,
-    lengths: list[float],
-    rewards: torch.Tensor,
+    rollout: Rollout,
     losses: dict[str, float],
+    ranks: Ranks,
 ) -> dict:
-    """One iteration's line of the training log."""
-    per_group = rewards.mean(0)
-    samples = env.num_envs * ppo.storage.num_transitions_per_env
-    return {
+    """One iteration's line of the training log, over every rank's environments."""
+    per_rank = rollout.rewards.mean(0).double()
+    totals = summed(ranks, [sum(rollout.lengths), len(rollout.lengths), rollout.nonfinite, *per_rank.tolist()])
+    length_sum = totals[0]
+    ended = totals[1]
+    per_group = np.array(totals[3:]) / ranks.world_size
+    samples = ranks.world_size * env.num_envs * ppo.storage.num_transitions_per_env
+    row = {
         "iteration": iteration,
         "seconds": round(seconds, 3),
         "samples_per_s": round(samples / seconds, 1),
-        "episode_length_s": round(float(np.mean(lengths)) / env.control_hz, 4) if lengths else None,
+        "episode_length_s": round(length_sum / ended / env.control_hz, 4) if ended else None,
         "reward": round(float(per_group.sum()), 4),
         **{f"reward_{g}": round(float(v), 4) for g, v in zip(GROUPS, per_group)},
         **{f"loss_{k}": round(float(v), 4) for k, v in losses.items()},
         "learning_rate": ppo.learning_rate,
         "motion_far_m": round(env.curriculum.motion_far_m, 4),
         "penalty_scale": round(env.curriculum.penalty_scale, 4),
+        "nonfinite_resets": int(totals[2]),
     }
+    if ranks.distributed:
+        digests = gather_to_leader(ranks, weights_digest(ppo.actor) + weights_digest(ppo.critic))
+        row["rank_weights"] = digests
+    return row
 
 
 def _drop_rows_after(path: Path, iteration: int) -> None:

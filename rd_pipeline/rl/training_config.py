@@ -25,6 +25,10 @@ class TrainConfig:
     """Iterations between checkpoints."""
     seed: int = 0
     """Seeds torch, the environment and the sampler."""
+    ranks: int = 1
+    """Training processes (data-parallel PPO through torchrun, gloo on CPU, NCCL on GPUs): each
+    steps `env.num_envs` environments, so an iteration learns from ranks x num_envs x
+    steps_per_env samples. A checkpoint continues with the number of ranks that made it."""
     clip: str = ""
     """Train on part of the motion, `START:END` in seconds (empty: all of it)."""
     scoring_starts: int = 8
@@ -39,8 +43,13 @@ class TrainConfig:
     """Segment sampler."""
 
     def __post_init__(self) -> None:
-        require_positive(self, "iterations", "checkpoint_every", "scoring_starts")
+        require_positive(self, "iterations", "checkpoint_every", "scoring_starts", "ranks")
         clip_seconds(self.clip)
+
+    @property
+    def samples_per_iteration(self) -> int:
+        """PPO samples one iteration collects over every rank."""
+        return self.ranks * self.env.num_envs * self.ppo.steps_per_env
 
 
 def clip_seconds(clip: str) -> tuple[float, float | None]:

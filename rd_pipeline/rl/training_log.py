@@ -15,9 +15,14 @@ def checkpoint_path(folder: Path, iteration: int) -> Path:
     return folder / CHECKPOINT_DIR / f"model_{iteration}.pt"
 
 
+def checkpoint_iteration(path: Path) -> int:
+    """The iteration a checkpoint was saved after, from its name."""
+    return int(path.stem.removeprefix("model_"))
+
+
 def checkpoints_by_iteration(folder: Path) -> dict[int, Path]:
     """A training folder's checkpoints keyed by the iteration each was saved after, oldest first."""
-    found = {int(path.stem.removeprefix("model_")): path for path in (folder / CHECKPOINT_DIR).glob("model_*.pt")}
+    found = {checkpoint_iteration(path): path for path in (folder / CHECKPOINT_DIR).glob("model_*.pt")}
     return dict(sorted(found.items()))
 
 

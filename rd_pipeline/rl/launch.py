@@ -1,0 +1,116 @@
+"""Running a training job as several processes (data-parallel PPO) through torchrun.
+
+The stage process writes the job beside the work folder and starts `torchrun`, whose ranks run
+`python -m rd_pipeline.rl.launch JOB`: each joins the process group, trains its share, and rank 0
+writes the log, the checkpoints and the outcome. The stage process follows the log for its
+progress bar. On one machine torchrun runs standalone; across machines it takes its rendezvous
+from its own environment variables (`PET_NNODES`, `PET_NODE_RANK`, `PET_RDZV_ENDPOINT`, ...).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import torch
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.rl.distributed import join_process_group, leave_process_group
+from rd_pipeline.rl.runner import TrainingJob, TrainingOutcome, run_job
+from rd_pipeline.rl.training_log import LOG_FILE
+
+POLL_S = 1.0
+"""How often the stage process reads the log of running ranks."""
+
+
+def job_files(work: Path) -> tuple[Path, Path, Path]:
+    """The job, the outcome and the ranks' console output, beside the work folder (rank 0 may
+    empty the work folder itself)."""
+    stem = work.parent / work.name
+    return stem.with_suffix(".job.pt"), stem.with_suffix(".outcome.pt"), stem.with_suffix(".ranks.log")
+
+
+def torchrun_command(job_file: Path, ranks: int) -> list[str]:
+    """`torchrun` for `ranks` processes in all: standalone on one machine, or this machine's share
+    of `PET_NNODES` machines whose rendezvous torchrun reads from its environment."""
+    nodes = int(os.environ.get("PET_NNODES", "1"))
+    if ranks % nodes:
+        raise PipelineError(f"train.ranks={ranks} does not split over PET_NNODES={nodes} machines")
+    layout = [f"--nproc-per-node={ranks // nodes}"]
+    if nodes == 1:
+        layout.append("--standalone")
+    return [sys.executable, "-m", "torch.distributed.run", *layout, "-m", __name__, str(job_file)]
+
+
+def train_in_processes(job: TrainingJob, on_iteration: Callable[[dict], None]) -> TrainingOutcome:
+    """Train `job` as `job.config.ranks` processes, following rank 0's log into `on_iteration`."""
+    job_file, outcome_file, output_file = job_files(job.work)
+    torch.save(job, job_file)
+    outcome_file.unlink(missing_ok=True)
+    command = torchrun_command(job_file, job.config.ranks)
+    with output_file.open("w") as output:
+        process = subprocess.Popen(command, stdout=output, stderr=subprocess.STDOUT)
+        followed = _follow_log(job.work / LOG_FILE, process, on_iteration)
+    machine = os.environ.get("PET_NODE_RANK", "0")
+    if process.returncode == 0 and machine != "0":
+        raise PipelineError(
+            f"train: the ranks of machine {machine} finished; machine 0 (PET_NODE_RANK=0) writes the artifact"
+        )
+    if process.returncode != 0 or not outcome_file.exists():
+        tail = output_file.read_text().strip().splitlines()[-1:] or ["no output"]
+        raise PipelineError(
+            f"train: the {job.config.ranks} training processes stopped (exit {process.returncode}) "
+            f"after {followed} logged iterations; their output is in {output_file}: {tail[0]}"
+        )
+    outcome: TrainingOutcome = torch.load(outcome_file, weights_only=False)
+    for path in (job_file, outcome_file, output_file):
+        path.unlink()
+    return outcome
+
+
+def _follow_log(log: Path, process: subprocess.Popen, on_iteration: Callable[[dict], None]) -> int:
+    """Hand each new complete log line to `on_iteration` until `process` ends; returns how many."""
+    seen = len(log.read_text().splitlines()) if log.exists() else 0
+    followed = 0
+    while True:
+        finished = process.poll() is not None
+        lines = log.read_text().splitlines(keepends=True) if log.exists() else []
+        for line in lines[seen:]:
+            if not line.endswith("\n"):
+                break
+            on_iteration(json.loads(line))
+            seen += 1
+            followed += 1
+        if finished:
+            return followed
+        time.sleep(POLL_S)
+
+
+def _rank_main(job_file: Path) -> None:
+    """One rank of a data-parallel training (what torchrun starts)."""
+    job: TrainingJob = torch.load(job_file, weights_only=False)
+    ranks = join_process_group(job.config.env.device)
+    # The machine's cores are shared by its ranks: each steps its physics and runs torch on its
+    # share (the thread count changes no result).
+    env = job.config.env
+    threads = max(1, env.threads // ranks.local_world_size)
+    config = dataclasses.replace(job.config, env=dataclasses.replace(env, threads=threads))
+    job = dataclasses.replace(job, config=config)
+    torch.set_num_threads(max(1, (os.cpu_count() or 1) // ranks.local_world_size))
+    try:
+        outcome = run_job(job, lambda row: None, ranks)
+        if ranks.leader:
+            _, outcome_file, _ = job_files(job.work)
+            torch.save(outcome, outcome_file)
+    finally:
+        leave_process_group()
+
+
+if __name__ == "__main__":
+    _rank_main(Path(sys.argv[1]))

@@ -1,0 +1,87 @@
+"""Data-parallel PPO on CPU: two ranks (gloo) keep identical weights, and resume bit for bit."""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import torch
+from conftest import h1_2_dance_job
+
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.rl.actions import ActionConfig
+from rd_pipeline.rl.distributed import Ranks
+from rd_pipeline.rl.env_config import EnvConfig
+from rd_pipeline.rl.launch import train_in_processes
+from rd_pipeline.rl.ppo_config import PpoConfig
+from rd_pipeline.rl.runner import TrainingRunner, run_job
+from rd_pipeline.rl.trainer import load_checkpoint
+from rd_pipeline.rl.training_config import TrainConfig
+from rd_pipeline.rl.training_log import checkpoint_path, read_training_log
+
+CONFIG = TrainConfig(
+    iterations=3,
+    checkpoint_every=1,
+    scoring_starts=2,
+    ranks=2,
+    env=EnvConfig(num_envs=4, threads=2, actions=ActionConfig(mode="all")),
+    ppo=PpoConfig(steps_per_env=6, hidden_dims=(32, 32)),
+)
+
+
+def _weights(path: Path) -> dict[str, torch.Tensor]:
+    algorithm = torch.load(path, weights_only=False)["algorithm"]
+    return {**algorithm["actor_state_dict"], **algorithm["critic_state_dict"]}
+
+
+@pytest.mark.slow
+def test_two_ranks_keep_identical_weights_and_a_resumed_run_continues_bit_for_bit(tmp_path: Path) -> None:
+    rows: list[dict] = []
+    outcome = train_in_processes(h1_2_dance_job(CONFIG, tmp_path / "whole"), rows.append)
+    assert [row["iteration"] for row in rows] == [1, 2, 3]
+    assert rows == read_training_log(tmp_path / "whole")
+    # Each update leaves both ranks with the same weights, and every update changes them.
+    digests = [row["rank_weights"] for row in rows]
+    assert all(len(pair) == 2 and pair[0] == pair[1] for pair in digests)
+    assert len({pair[0] for pair in digests}) == 3
+    # One iteration learns from both ranks' environments.
+    assert all(row["samples_per_s"] > 0 and "start_zero_s" in row for row in rows)
+    assert outcome.num_actions > 0
+    saved = torch.load(checkpoint_path(tmp_path / "whole", 3), weights_only=False)
+    # Rank 0 saved both ranks' environments, and they are not the same draws.
+    first, second = saved["ranks"]
+    assert first["env"]["rng"] != second["env"]["rng"]
+    # The same run stopped after 2 iterations and continued from that checkpoint ends the same.
+    shutil.copytree(tmp_path / "whole" / "checkpoints", tmp_path / "resumed" / "checkpoints")
+    checkpoint_path(tmp_path / "resumed", 3).unlink()
+    resumed_job = h1_2_dance_job(CONFIG, tmp_path / "resumed", checkpoint_path(tmp_path / "resumed", 2))
+    train_in_processes(resumed_job, lambda row: None)
+    whole = _weights(checkpoint_path(tmp_path / "whole", 3))
+    resumed = _weights(checkpoint_path(tmp_path / "resumed", 3))
+    assert whole.keys() == resumed.keys()
+    for name, value in whole.items():
+        assert torch.equal(value, resumed[name]), name
+    again = torch.load(checkpoint_path(tmp_path / "resumed", 3), weights_only=False)
+    assert [r["env"]["rng"] for r in again["ranks"]] == [r["env"]["rng"] for r in saved["ranks"]]
+
+
+def test_a_checkpoint_continues_only_with_the_ranks_that_made_it(tmp_path: Path) -> None:
+    single = replace(CONFIG, iterations=1, ranks=1)
+    run_job(h1_2_dance_job(single, tmp_path / "one"), lambda row: None)
+    checkpoint = checkpoint_path(tmp_path / "one", 1)
+    runner = TrainingRunner(h1_2_dance_job(single, tmp_path / "one"))
+    with pytest.raises(PipelineError) as error:
+        load_checkpoint(checkpoint, runner.ppo, runner.env, Ranks(rank=1, world_size=2))
+    runner.close()
+    assert str(error.value) == (
+        f"{checkpoint}: made by 1 training processes, resumed with 2; continue it with train.ranks=1"
+    )
+
+
+def test_rank_seeds_keep_rank_zero_and_part_the_others() -> None:
+    seeds = [Ranks(rank=r, world_size=3).seed(7) for r in range(3)]
+    assert seeds[0] == 7
+    assert len(set(seeds)) == 3
+    assert Ranks(rank=1, world_size=3).seed(7) == seeds[1]
