@@ -14,7 +14,8 @@ stepping of the same models from the same states (for the new path, the env's ow
 update, as the trainer does); and CPU memory per environment (resident-set growth of building the
 path's environments, divided by their number). Medians over `--repeats` blocks; the paths
 alternate block by block so both see the same machine. The last line reads
-`speedup=<fastest PPO samples/s / old> physics_ratio=<its env physics / its raw batched stepping>`.
+`speedup=<fast path PPO samples/s / old> physics_ratio=<its env physics / its raw batched stepping>`
+(every path's ratio to old is in `speedup_by_path`; `fast_bf16` is the fast path with a bf16 update).
 The ranks path is real training (`rd_pipeline.rl.launch`, `--envs` split over the ranks, the same
 total batch): its PPO samples/s is the median of the training log's iterations after the first,
 one launch per block; its physics figures are those of the single-process fast path.
@@ -59,8 +60,12 @@ PATHS = {
     "old": {"backend": "cpu", "collision": "mesh"},
     "new": {"backend": "rollout", "collision": "primitive"},
     "fast": {"backend": "rollout", "collision": "primitive", **FAST},
+    "fast_bf16": {"backend": "rollout", "collision": "primitive", **FAST},
     "warp": {"backend": "warp", "collision": "primitive"},
 }
+
+PPO = {"fast_bf16": PpoConfig(mixed_precision=True)}
+"""PPO settings of the paths that do not train with the `cpu` profile's (the paper's)."""
 
 
 def main() -> None:
@@ -70,7 +75,7 @@ def main() -> None:
     parser.add_argument("--envs", type=int, default=128)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--paths", nargs="+", default=["old", "new", "fast"], choices=list(PATHS))
+    parser.add_argument("--paths", nargs="+", default=["old", "new", "fast", "fast_bf16"], choices=list(PATHS))
     parser.add_argument("--ranks", type=int, default=2, help="processes of the ranks path (0: skip it)")
     parser.add_argument("--device", default="cpu", help="torch device for the warp path: cpu or cuda")
     parser.add_argument("--out", type=Path, default=Path("bench/results/env_throughput.json"))
@@ -91,7 +96,14 @@ def main() -> None:
         memory_mb[name] = (_rss_mb() - before) / args.envs
     rates = {name: {"env": [], "raw": [], "ppo": []} for name in envs}
     ppos = {
-        name: build_ppo(env.get_observations(), args.envs, env.num_actions, len(GROUPS), PpoConfig(), env.config.device)
+        name: build_ppo(
+            env.get_observations(),
+            args.envs,
+            env.num_actions,
+            len(GROUPS),
+            PPO.get(name, PpoConfig()),
+            env.config.device,
+        )
         for name, env in envs.items()
     }
     ranked = args.ranks > 1 and "fast" in envs
@@ -117,6 +129,7 @@ def main() -> None:
         measured = rates[name]
         result["paths"][name] = {
             **PATHS[name],
+            "mixed_precision": PPO.get(name, PpoConfig()).mixed_precision,
             "cpu_memory_mb_per_env": round(memory_mb[name], 2),
             "env_physics_steps_per_s": round(statistics.median(measured["env"])),
             "raw_batched_steps_per_s": round(statistics.median(measured["raw"])),
@@ -137,12 +150,11 @@ def main() -> None:
     line = ""
     if "old" in rates and "fast" in envs:
         old = result["paths"]["old"]["ppo_samples_per_s_including_update"]
-        fastest = max(
-            (path for name, path in result["paths"].items() if name.startswith("fast")),
-            key=lambda path: path["ppo_samples_per_s_including_update"],
-        )
+        result["speedup_by_path"] = {
+            name: round(path["ppo_samples_per_s_including_update"] / old, 2) for name, path in result["paths"].items()
+        }
         physics = result["paths"]["fast"]
-        speedup = fastest["ppo_samples_per_s_including_update"] / old
+        speedup = physics["ppo_samples_per_s_including_update"] / old
         ratio = physics["env_physics_steps_per_s"] / physics["raw_batched_steps_per_s"]
         result["speedup"] = round(speedup, 2)
         result["physics_ratio"] = round(ratio, 3)

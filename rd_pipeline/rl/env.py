@@ -53,6 +53,7 @@ class TrackingEnv:
         self.robot = robot
         self.config = config
         self.num_envs = config.num_envs
+        self.seed = seed
         self.rng = np.random.default_rng(seed)
         self.step_dt = config.physics_dt * config.decimation
         self.control_hz = 1.0 / self.step_dt
@@ -99,7 +100,11 @@ class TrackingEnv:
         self.backend = make_backend(config.backend, models, config.threads, config.device)
         self.device = self.backend.device
         self.dr_params = self.tensor(dr_params)
-        self.rfi_factor = dr_params[:, 8]
+        effort = np.asarray(self.robot.config.effort_limit)
+        scale = events.random_joint_force_scale(config.randomization, dr_params[:, 8], effort)
+        self.joint_force_scale = self.tensor(scale, torch.float64)
+        self.joint_force = torch.zeros(self.num_envs, base.nv, dtype=torch.float64, device=self.device)
+        self.force_generator = torch.Generator(device=self.device).manual_seed(self.seed)
         self.delay = self.tensor(dr_params[:, 7], torch.long)
         return base
 
@@ -301,10 +306,9 @@ class TrackingEnv:
             self.backend.push(due.to(self.device), torch.as_tensor(velocity, device=self.device))
             intervals = events.push_intervals(r, len(due), self.step_dt, self.rng)
             self.next_push[due] = self.episode_length_buf[due] + torch.as_tensor(intervals)
-        forces = events.random_joint_forces(r, self.rfi_factor, np.asarray(self.robot.config.effort_limit), self.rng)
-        joint_force = torch.zeros(self.num_envs, self.backend.models[0].nv, dtype=torch.float64, device=self.device)
-        joint_force[:, self.dof_idx] = torch.as_tensor(forces, device=self.device)
-        return joint_force
+        forces = events.random_joint_forces(self.joint_force_scale, self.force_generator)
+        self.joint_force[:, self.dof_idx] = forces
+        return self.joint_force
 
     def _tracking_state(
         self, st: dict[str, torch.Tensor], actions: torch.Tensor, before_vel: torch.Tensor
@@ -367,6 +371,7 @@ class TrackingEnv:
             "motion_far": self.curriculum.motion_far_m,
             "penalty_scale": self.curriculum.penalty_scale,
             "rng": self.rng.bit_generator.state,
+            "force_rng": self.force_generator.get_state(),
             "feet_air_time": self.feet_air_time.clone(),
             "sigma_variance": self.sigma.state_dict(),
         }
@@ -386,6 +391,7 @@ class TrackingEnv:
         self.curriculum = curricula.CurriculumState(state["motion_far"], state["penalty_scale"])
         self.sigma.load_state_dict(state["sigma_variance"])
         self.rng.bit_generator.state = state["rng"]
+        self.force_generator.set_state(state["force_rng"])
 
     def close(self) -> None:
         self.backend.close()

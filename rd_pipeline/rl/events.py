@@ -1,8 +1,9 @@
 """Event terms: reference state initialization at reset and domain randomization (per-environment
 models at startup, pushes and random force injection while stepping).
 
-Random numbers come from one numpy generator on the host, in a fixed order, so a seed gives the
-same run on any device; the draws are copied to the training device.
+Random numbers come from one numpy generator on the host, in a fixed order, and are copied to the
+training device, except the force injected at every control step, which a torch generator draws
+on the device itself; a seed gives the same run on the same device.
 """
 
 from __future__ import annotations
@@ -58,12 +59,16 @@ def push_velocities(r: Randomization, count: int, rng: np.random.Generator) -> n
     return rng.uniform(-r.push_max_speed, r.push_max_speed, (count, 2))
 
 
-def random_joint_forces(
-    r: Randomization, rfi_factor: np.ndarray, effort_limit: np.ndarray, rng: np.random.Generator
-) -> np.ndarray:
-    """(N, J) random force injection: `torque_rfi` x factor x effort limit, redrawn every control step."""
-    scale = r.torque_rfi * rfi_factor[:, None] * effort_limit
-    return scale * rng.uniform(-1.0, 1.0, scale.shape)
+def random_joint_force_scale(r: Randomization, rfi_factor: np.ndarray, effort_limit: np.ndarray) -> np.ndarray:
+    """(N, J) largest random joint force of each environment: `torque_rfi` x its factor x effort limit."""
+    return r.torque_rfi * rfi_factor[:, None] * effort_limit
+
+
+def random_joint_forces(scale: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
+    """(N, J) random force injection, uniform in +-`scale`, redrawn every control step where
+    `scale` lives (on a GPU nothing crosses from the host)."""
+    unit = torch.rand(scale.shape, generator=generator, dtype=scale.dtype, device=scale.device)
+    return scale * (2.0 * unit - 1.0)
 
 
 @dataclass(frozen=True)

@@ -106,6 +106,7 @@ def build_ppo(
         learning_rate=config.learning_rate,
         max_grad_norm=config.max_grad_norm,
         desired_kl=config.desired_kl,
+        use_mixed_precision=config.mixed_precision,
         device=device,
         multi_gpu_cfg={"global_rank": ranks.rank, "world_size": ranks.world_size} if ranks.distributed else None,
     )

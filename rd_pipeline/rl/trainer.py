@@ -181,6 +181,8 @@ def _log_row(
         "motion_far_m": round(env.curriculum.motion_far_m, 4),
         "penalty_scale": round(env.curriculum.penalty_scale, 4),
         "nonfinite_resets": int(totals[2]),
+        # Rank 0's contact and constraint peaks (on Warp also capacities, overflow, solver iterations).
+        **{f"physics_{name}": value for name, value in env.backend.diagnostics().items()},
     }
     if ranks.distributed:
         digests = gather_to_leader(ranks, weights_digest(ppo.actor) + weights_digest(ppo.critic))

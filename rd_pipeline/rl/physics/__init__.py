@@ -8,6 +8,7 @@ Backends take and return torch tensors on their device: `rollout` (C MuJoCo batc
 from __future__ import annotations
 
 import mujoco
+import torch
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.rl.physics.cpu import MujocoCpuBackend
@@ -30,6 +31,12 @@ def make_backend(name: str, models: list[mujoco.MjModel], threads: int, device: 
     if name == "cpu":
         return MujocoCpuBackend(models, threads)
     if name == "warp":
+        # The CPU torch wheel (the default install) would only fail later, deep in Warp's interop.
+        if device.startswith("cuda") and not torch.cuda.is_available():
+            raise PipelineError(
+                f"train.env.device '{device}': torch {torch.__version__} has no CUDA: "
+                'install the CUDA build, see README "Training on a GPU"'
+            )
         # mujoco-warp is an optional extra: imported only when asked for.
         from rd_pipeline.rl.physics.warp import MujocoWarpBackend
 

@@ -29,6 +29,8 @@ class MujocoCpuBackend:
         bounds = np.linspace(0, self.num_envs, self.threads + 1).astype(int)
         self.chunks = [range(a, b) for a, b in itertools.pairwise(bounds) if b > a]
         self.buffers, self.state = state_buffers(self.num_envs, models[0])
+        self.peaks = np.zeros((self.num_envs, 2), dtype=np.int64)
+        """Per environment, most contacts and constraint rows since `diagnostics`."""
 
     def set_state(self, env_ids: torch.Tensor, qpos: torch.Tensor, qvel: torch.Tensor) -> None:
         qpos_host = qpos.numpy()
@@ -90,6 +92,9 @@ class MujocoCpuBackend:
         # External (contact) force on each body, world frame, from one C call instead of a loop over contacts.
         mujoco.mj_rnePostConstraint(model, data)
         b["contact_force"][i] = data.cfrc_ext[:, 3:]
+        # MuJoCo's high-water marks cover every substep; a reset's mj_resetData zeroes them, so
+        # they are kept here before that.
+        self.peaks[i] = np.maximum(self.peaks[i], (data.maxuse_con, data.maxuse_efc))
 
     def push(self, env_ids: torch.Tensor, planar_velocity: torch.Tensor) -> None:
         """Add (k, 2) horizontal velocity to the floating base of `env_ids` (a push)."""
@@ -112,6 +117,18 @@ class MujocoCpuBackend:
             mujoco.mj_setState(model, data, states[i], spec)
             mujoco.mj_forward(model, data)
             self._read(i)
+
+    def diagnostics(self) -> dict[str, float]:
+        """Since the last call: `contacts_peak_world` and `constraints_peak_world`, the most
+        contacts and constraint rows in one environment at any physics step. C MuJoCo takes these
+        from its arena as needed, with no fixed count to overflow; solver iterations are not kept
+        (`solver_niter` is the last substep's only)."""
+        for data in self.datas:
+            data.maxuse_con = 0
+            data.maxuse_efc = 0
+        peaks = self.peaks.max(axis=0)
+        self.peaks[:] = 0
+        return {"contacts_peak_world": float(peaks[0]), "constraints_peak_world": float(peaks[1])}
 
     def close(self) -> None:
         if self.pool is not None:

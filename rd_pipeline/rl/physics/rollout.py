@@ -125,5 +125,17 @@ class MujocoRolloutBackend:
         self.sensors[:] = states[:, self.nstate :]
         self._publish(np.arange(self.num_envs))
 
+    def diagnostics(self) -> dict[str, float]:
+        """Since the last call: `contacts_peak_world` and `constraints_peak_world`, the most
+        contacts and constraint rows in one environment at any physics step of `step` (MuJoCo's
+        high-water marks of the rollout threads' datas). C MuJoCo takes these from its arena as
+        needed, with no fixed count to overflow; solver iterations are not kept."""
+        contacts = max(data.maxuse_con for data in self.datas)
+        constraints = max(data.maxuse_efc for data in self.datas)
+        for data in self.datas:
+            data.maxuse_con = 0
+            data.maxuse_efc = 0
+        return {"contacts_peak_world": float(contacts), "constraints_peak_world": float(constraints)}
+
     def close(self) -> None:
         self.pool.close()

@@ -49,6 +49,12 @@ class PhysicsBackend(Protocol):
 
     def set_states(self, states: np.ndarray) -> None: ...
 
+    def diagnostics(self) -> dict[str, float]:
+        """Contact, constraint and solver figures since the last call, then reset (the keys are in
+        each backend's docstring; `contacts_peak_world` and `constraints_peak_world` in all). May
+        wait for the device: call it once per training iteration."""
+        ...
+
     def close(self) -> None: ...
 
 
