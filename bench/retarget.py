@@ -1,6 +1,6 @@
 """Benchmark: our retargeting on every shared LAFAN1 take and robot, beside the dataset CSVs, one ruler.
 
-    python bench/retarget.py [--robots g1 h1 h1_2] [--motions dance1_subject1 ...] [--jobs 2] [--resume]
+    python bench/retarget.py [--robots g1 g1_29dof h1 h1_2] [--motions dance1_subject1 ...] [--jobs 2] [--resume]
                              [--out bench/results/retarget]
 
 For each (robot, take): retarget the BVH with the stage's default params, one take per core
@@ -50,6 +50,8 @@ COLUMNS = {
     "pelvis_height_dev_p95_m": "pelvis dev p95",
     "skate_stance_mean_mm_s": "skate",
     "joint_limit_violations": "jl",
+    "range_limited_frames": "range-held",
+    "range_limited_joints": "most held joint",
     "velocity_limit_violations": "vel",
     "self_collision_frames": "self-coll",
     "jerk_mean": "jerk",
@@ -76,7 +78,7 @@ BARS = {
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--robots", nargs="+", default=["g1", "h1", "h1_2"])
+    parser.add_argument("--robots", nargs="+", default=["g1", "g1_29dof", "h1", "h1_2"])
     parser.add_argument("--motions", nargs="+", default=shared_takes())
     parser.add_argument("--jobs", type=int, default=2, help="takes retargeted at once, each pinned to its own core")
     parser.add_argument("--resume", action="store_true", help="keep the rows already in <out>.jsonl")
@@ -242,13 +244,16 @@ def _table(rows: list[dict]) -> str:
     lines.append("Bold: over the issue's bar (penetration 10 mm, pelvis deviation 0.10 m, skate 20 mm/s, zero limit,")
     lines.append("self-collision and diverged frames). Errors in mm, speeds in m/s, jerk in rad/s^3, fps on one core;")
     lines.append("'pelvis >0.2 m off %' is the share of frames whose pelvis is more than 0.2 m from its own target;")
-    lines.append("'planted foot turn p95' (degrees) how far planted feet are turned from their targets (ours only).")
+    lines.append("'planted foot turn p95' (degrees) how far planted feet are turned from their targets (ours only);")
+    lines.append("'range-held': frames where some joint sits at a bound of its range, so the range decided it.")
     return "\n".join(lines) + "\n"
 
 
 def _cell(value, key: str) -> str:
     if value is None:
         return "-"
+    if isinstance(value, dict):  # frames per joint, most first: the first one
+        return next((f"{name} {frames}" for name, frames in value.items()), "-")
     if key == "pelvis_height_dev_p95_m":
         text = f"{value:.3f}"
     elif isinstance(value, float):

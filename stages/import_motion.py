@@ -84,7 +84,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="import",
-    version=3,
+    version=4,
     description="LAFAN1_Retargeting_Dataset CSV -> robot reference motion at 50 Hz",
     params=ImportConfig,
     provides="reference",

@@ -32,6 +32,8 @@ KEYS = {
     "pelvis_height_dev_p95_m",
     "skate_stance_mean_mm_s",
     "joint_limit_violations",
+    "range_limited_frames",
+    "range_limited_joints",
     "velocity_limit_violations",
     "self_collision_frames",
     "jerk_mean",
@@ -287,6 +289,27 @@ def test_pelvis_height_and_divergence_rulers(g1) -> None:
     assert quality["diverged_frames"] == 3
     assert quality["keypoint_error_max_mm"] == pytest.approx(1000.0 * np.sqrt(3 * 0.51**2), abs=1e-3)
     assert quality["root_speed_p999_m_s"] == 0.0
+    # A take off its targets through most of its frames (a frozen IK) raises its own median; the
+    # absolute limit still sees every frame beyond it.
+    frozen = targets.copy()
+    frozen[40:] += 1.0
+    quality = retarget_quality(g1, reference, keypoint_targets=frozen, keypoint_bodies=bodies)
+    assert quality["diverged_frames"] == n_frames - 40
+
+
+def test_range_limited_frames_name_the_joints_held_at_a_bound(g1) -> None:
+    joint_pos = _standing(g1, 40)
+    assert retarget_quality(g1, _hand_built(g1, joint_pos))["range_limited_frames"] == 0
+    names = g1.config.joint_names
+    knee = names.index("left_knee_joint")
+    roll = names.index("right_ankle_roll_joint")
+    joint_pos[5:25, knee] = g1.joint_range[knee, 1]
+    joint_pos[20:30, roll] = g1.joint_range[roll, 0] + 0.0005
+    joint_pos[30:35, roll] = g1.joint_range[roll, 0] + 0.01  # near, but not held
+    quality = retarget_quality(g1, _hand_built(g1, joint_pos))
+    assert quality["range_limited_frames"] == 25
+    assert quality["range_limited_joints"] == {"left_knee_joint": 20, "right_ankle_roll_joint": 10}
+    assert quality["joint_limit_violations"] == 0
 
 
 def test_planted_foot_turn_counts_planted_feet_only(g1) -> None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -43,6 +44,11 @@ class QualityThresholds:
     """A frame has diverged when its keypoint error is this many times the take's median ..."""
     diverged_margin_m: float = 0.15
     """... and at least this much above it (a low median alone does not make a frame diverged)."""
+    diverged_absolute_m: float = 0.5
+    """A frame has also diverged when its keypoint error exceeds this, whatever the median: a take
+    that fails through most of its frames raises its own median (the first two tests go blind)."""
+    range_limit_margin_rad: float = 1e-3
+    """A joint this close to a bound of its range is held there: the range decided its angle."""
 
 
 @dataclass(frozen=True)
@@ -143,7 +149,7 @@ def retarget_quality(
     frames_per_s: float | None = None,
     human_pelvis: np.ndarray | None = None,
     foot_orientations: np.ndarray | None = None,
-) -> dict[str, float | int | str | None]:
+) -> dict[str, float | int | str | dict[str, int] | None]:
     """SPEC retargeting metrics of one reference motion, as JSON-ready plain numbers.
 
     `keypoint_targets` (T, K, 3) are the scaled human positions the bodies `keypoint_bodies` should reach
@@ -161,7 +167,7 @@ def summarize_quality(
     series: dict[str, np.ndarray],
     thresholds: QualityThresholds = QualityThresholds(),
     frames_per_s: float | None = None,
-) -> dict[str, float | int | str | None]:
+) -> dict[str, float | int | str | dict[str, int] | None]:
     """`retarget_quality` from per-frame rulers already computed by `quality_series`."""
     dt = 1.0 / reference.fps
     feet = FootMeshes.from_robot(robot).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
@@ -189,6 +195,7 @@ def summarize_quality(
         "pelvis_height_dev_p95_m": None if pelvis_dev is None else _round(np.percentile(np.abs(pelvis_dev), 95.0)),
         "skate_stance_mean_mm_s": _round(1000.0 * skate),
         "joint_limit_violations": _joint_limit_violations(robot, reference.joint_pos, thresholds),
+        **_range_limited(robot, reference.joint_pos, thresholds),
         "velocity_limit_violations": _velocity_limit_violations(robot, reference.joint_pos, dt, thresholds),
         "self_collision_frames": self_collision_frames(robot, reference, thresholds.self_collision_depth_m),
         "jerk_mean": _round(_jerk_mean(reference.joint_pos, dt)),
@@ -203,10 +210,11 @@ def summarize_quality(
 
 
 def diverged(keypoint_error: np.ndarray, thresholds: QualityThresholds) -> np.ndarray:
-    """(T,) bool: frames whose keypoint error is far above the take's median (both a ratio and a margin)."""
+    """(T,) bool: frames whose keypoint error is far above the take's median (both a ratio and a
+    margin), or above the absolute limit."""
     median = float(np.median(keypoint_error))
     limit = max(thresholds.diverged_ratio * median, median + thresholds.diverged_margin_m)
-    return keypoint_error > limit
+    return (keypoint_error > limit) | (keypoint_error > thresholds.diverged_absolute_m)
 
 
 def self_collision_frames(robot: Robot, reference: ReferenceMotion, depth_m: float) -> int:
@@ -265,6 +273,27 @@ def _joint_limit_violations(robot: Robot, joint_pos: np.ndarray, thresholds: Qua
     tol = thresholds.joint_limit_tolerance_rad
     outside = ((joint_pos < low - tol) | (joint_pos > high + tol)) & limited
     return int(outside.any(axis=1).sum())
+
+
+def range_limited(robot: Robot, joint_pos: np.ndarray, thresholds: QualityThresholds) -> np.ndarray:
+    """(T, J) bool: joint j of frame t is at a bound of its range (within the margin), so the range,
+    not the human's pose, decided its angle."""
+    low, high = robot.joint_range.T
+    margin = thresholds.range_limit_margin_rad
+    return (joint_pos < low + margin) | (joint_pos > high - margin)
+
+
+def _range_limited(robot: Robot, joint_pos: np.ndarray, thresholds: QualityThresholds) -> dict[str, Any]:
+    """`range_limited_frames` (frames where some joint is at a bound) and `range_limited_joints`
+    (frames per such joint, most first)."""
+    held = range_limited(robot, joint_pos, thresholds)
+    per_joint = held.sum(axis=0)
+    order = np.argsort(-per_joint, kind="stable")
+    names = robot.config.joint_names
+    return {
+        "range_limited_frames": int(held.any(axis=1).sum()),
+        "range_limited_joints": {names[j]: int(per_joint[j]) for j in order if per_joint[j] > 0},
+    }
 
 
 def _velocity_limit_violations(robot: Robot, joint_pos: np.ndarray, dt: float, thresholds: QualityThresholds) -> int:

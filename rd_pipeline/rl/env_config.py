@@ -59,7 +59,8 @@ class EnvConfig:
     """Torch device of the simulation state and the training tensors: `cpu`, or `cuda` / `cuda:N`
     with the warp backend (physics and learning then share GPU memory)."""
     threads: int = 2
-    """Threads stepping C MuJoCo (rollout and cpu backends): one per core."""
+    """Threads stepping C MuJoCo (rollout and cpu backends): one per core. The ranks of a
+    data-parallel run on one machine share them (each steps on threads / ranks there)."""
     collision: CollisionModel = "primitive"
     """Collision geometry of the training model: `primitive` (fitted capsules and boxes, self-collision
     only in the robot config's pairs) or `mesh` (the MJCF's meshes, every pair); validation always
