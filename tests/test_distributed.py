@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 import torch
-from conftest import h1_2_dance_job
+from conftest import cli, h1_2_dance_job
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.rl.actions import ActionConfig
@@ -85,3 +86,22 @@ def test_rank_seeds_keep_rank_zero_and_part_the_others() -> None:
     assert seeds[0] == 7
     assert len(set(seeds)) == 3
     assert Ranks(rank=1, world_size=3).seed(7) == seeds[1]
+
+
+@pytest.mark.slow
+def test_nproc_runs_the_train_stage_as_that_many_ranks(artifacts: Path) -> None:
+    result = cli("run", "--until", "train", "--source", "csv", "--nproc", "2")
+    assert result.returncode == 0, result.stderr
+    (folder,) = (artifacts / "train" / "g1" / "dance1_subject2").iterdir()
+    manifest = json.loads((folder / "manifest.json").read_text())
+    params = manifest["params"]
+    assert params["ranks"] == 2
+    per_rank = params["iterations"] * params["env"]["num_envs"] * params["ppo"]["steps_per_env"]
+    assert manifest["metrics"]["samples"] == 2 * per_rank
+    checkpoint = torch.load(checkpoint_path(folder, params["iterations"]), weights_only=False)
+    assert len(checkpoint["ranks"]) == 2
+    # Nothing of the launch is left beside the artifact.
+    assert sorted(p.name for p in folder.parent.iterdir()) == [folder.name]
+    refused = cli("run", "--until", "train", "--source", "csv", "--nproc", "0")
+    assert refused.returncode == 2
+    assert refused.stderr.strip().splitlines()[-1] == "error: parameter 'train.ranks' must be positive, got 0"
