@@ -67,8 +67,9 @@ def test_bench_reports_the_cpu_fallback_and_throughput(bench_result: dict) -> No
     (envs,) = bench_result["envs"]
     assert envs["capture_fallback_reason"] == reason
     assert envs["nonfinite_worlds"] == 0
+    # Both rates are rounded to 0.1: ten times the one is within 0.5 + 0.05 of the other.
     assert envs["env_steps_per_s"] > 0 and envs["env_physics_steps_per_s"] == pytest.approx(
-        10 * envs["env_steps_per_s"], rel=1e-3
+        10 * envs["env_steps_per_s"], abs=0.6
     )
     assert envs["raw_physics_steps_per_s"] > 0
     split = envs["split_ms_per_env_step"]

@@ -354,3 +354,18 @@ def test_an_episode_fails_when_any_termination_term_fires(monkeypatch: pytest.Mo
     joints = on_reference.joint_pos.clone()
     joints[2, 0] += 0.2
     assert terminations.failed(_state(body_pos=far, joint_pos=joints), context).tolist() == [False, True, True]
+
+
+def test_quaternion_product_and_rotation_vectors_match_scipy() -> None:
+    from scipy.spatial.transform import Rotation
+
+    from rd_pipeline.rl import quat
+
+    rotvec = np.random.default_rng(0).normal(size=(50, 3))
+    rotvec[0] = 0.0  # the identity, where sin(x/2)/x needs its limit
+    base = Rotation.random(50, random_state=1)
+    base_wxyz = base.as_quat()[:, [3, 0, 1, 2]]
+    mine = quat.multiply(quat.from_rotation_vector(torch.tensor(rotvec)), torch.tensor(base_wxyz)).numpy()
+    expected = (Rotation.from_rotvec(rotvec) * base).as_quat()[:, [3, 0, 1, 2]]
+    same_sign = np.sign((mine * expected).sum(1))[:, None]
+    assert np.allclose(mine, same_sign * expected, atol=1e-12)

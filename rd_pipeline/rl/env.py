@@ -104,7 +104,8 @@ class TrackingEnv:
         scale = events.random_joint_force_scale(config.randomization, dr_params[:, 8], effort)
         self.joint_force_scale = self.tensor(scale, torch.float64)
         self.joint_force = torch.zeros(self.num_envs, base.nv, dtype=torch.float64, device=self.device)
-        self.force_generator = torch.Generator(device=self.device).manual_seed(self.seed)
+        self.generator = torch.Generator(device=self.device).manual_seed(self.seed)
+        """Draws the reset noise and the injected joint forces on the device."""
         self.delay = self.tensor(dr_params[:, 7], torch.long)
         return base
 
@@ -181,7 +182,7 @@ class TrackingEnv:
         model = self.backend.models[0]
         ref = self.command.ref
         qpos, qvel = events.rsi_state(
-            self.config, ref, frames, model.nq, model.nv, self.qpos_idx, self.dof_idx, self.joint_range, self.rng
+            self.config, ref, frames, model.nq, model.nv, self.qpos_idx, self.dof_idx, self.joint_range, self.generator
         )
         self.command.start(host_ids, frames)
         self.episode_length_buf[host_ids] = 0
@@ -306,7 +307,7 @@ class TrackingEnv:
             self.backend.push(due.to(self.device), torch.as_tensor(velocity, device=self.device))
             intervals = events.push_intervals(r, len(due), self.step_dt, self.rng)
             self.next_push[due] = self.episode_length_buf[due] + torch.as_tensor(intervals)
-        forces = events.random_joint_forces(self.joint_force_scale, self.force_generator)
+        forces = events.random_joint_forces(self.joint_force_scale, self.generator)
         self.joint_force[:, self.dof_idx] = forces
         return self.joint_force
 
@@ -371,7 +372,7 @@ class TrackingEnv:
             "motion_far": self.curriculum.motion_far_m,
             "penalty_scale": self.curriculum.penalty_scale,
             "rng": self.rng.bit_generator.state,
-            "force_rng": self.force_generator.get_state(),
+            "device_rng": self.generator.get_state(),
             "feet_air_time": self.feet_air_time.clone(),
             "sigma_variance": self.sigma.state_dict(),
         }
@@ -391,7 +392,7 @@ class TrackingEnv:
         self.curriculum = curricula.CurriculumState(state["motion_far"], state["penalty_scale"])
         self.sigma.load_state_dict(state["sigma_variance"])
         self.rng.bit_generator.state = state["rng"]
-        self.force_generator.set_state(state["force_rng"])
+        self.generator.set_state(state["device_rng"])
 
     def close(self) -> None:
         self.backend.close()

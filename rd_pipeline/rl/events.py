@@ -1,23 +1,24 @@
 """Event terms: reference state initialization at reset and domain randomization (per-environment
 models at startup, pushes and random force injection while stepping).
 
-Random numbers come from one numpy generator on the host, in a fixed order, and are copied to the
-training device, except the force injected at every control step, which a torch generator draws
-on the device itself; a seed gives the same run on the same device.
+What is drawn once or rarely (the per-environment models, pushes) comes from a numpy generator on
+the host; what is drawn at every reset or control step (the reset noise, the injected joint force)
+comes from a torch generator on the training device, so nothing crosses between host and device
+for it. Both draw in a fixed order: a seed gives the same run on the same device.
 """
 
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 import torch
-from scipy.spatial.transform import Rotation
 
+from rd_pipeline.rl import quat
 from rd_pipeline.rl.env_config import EnvConfig, Randomization
-from rd_pipeline.rl.quat import rotate_inverse
 from rd_pipeline.rl.sim_model import randomized_copy
 
 DR_PARAMS = ("mass", "friction", "kp", "kd", "com_x", "com_y", "com_z", "delay", "rfi_factor")
@@ -73,14 +74,10 @@ def random_joint_forces(scale: torch.Tensor, generator: torch.Generator) -> torc
 
 @dataclass(frozen=True)
 class ReferenceFrames:
-    """The reference quantities reset draws from: (T, ...) tensors on the training device, and the
-    root orientations again on the host."""
+    """The reference quantities reset draws from: (T, ...) tensors on the training device."""
 
     root_pos: torch.Tensor
     root_quat: torch.Tensor
-    root_quat_host: np.ndarray
-    """`root_quat` on the host, where the rotation noise is composed (scipy), so a reset reads
-    nothing back from the device."""
     root_lin_vel: torch.Tensor
     root_ang_vel: torch.Tensor
     joint_pos: torch.Tensor
@@ -96,36 +93,33 @@ def rsi_state(
     qpos_idx: torch.Tensor,
     dof_idx: torch.Tensor,
     joint_range: torch.Tensor,
-    rng: np.random.Generator,
+    generator: torch.Generator,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """(k, nq), (k, nv) float64 states on the training device at reference `frames` (host indices)
-    with the appendix noise (reference state initialization), joint positions clipped to their range."""
+    """(k, nq), (k, nv) float64 states on the training device at reference `frames` with the
+    appendix noise (reference state initialization), joint positions clipped to their range. The
+    noise is drawn by `generator` on the device, so a reset reads nothing back and sends nothing."""
     k = len(frames)
     device = ref.root_pos.device
-    host_frames = frames.numpy()
     frames = frames.to(device)
-    host = lambda a: torch.from_numpy(np.asarray(a, dtype=np.float64)).to(device)
+    joints = len(qpos_idx)
+    normal = lambda *shape: torch.randn(*shape, generator=generator, dtype=torch.float64, device=device)
+    uniform = lambda bound, *shape: bound * (2.0 * _unit(generator, device, *shape) - 1.0)
     qpos = torch.zeros(k, nq, dtype=torch.float64, device=device)
     qvel = torch.zeros(k, nv, dtype=torch.float64, device=device)
-    joints = len(qpos_idx)
     # Draw order is part of the seed's meaning: root position, root rotation, joint positions,
     # root velocity, joint velocities.
-    root_noise = rng.normal(0, c.rsi_root_pos_m, (k, 3)) * [1, 1, 0]
-    qpos[:, :3] = ref.root_pos[frames].double() + host(root_noise)
-    quat = _perturb_quat(ref.root_quat_host[host_frames], np.radians(c.rsi_root_rot_deg), rng)
-    qpos[:, 3:7] = host(quat)
-    joint_noise = rng.uniform(-c.rsi_joint_pos, c.rsi_joint_pos, (k, joints))
-    qpos[:, qpos_idx] = ref.joint_pos[frames].double() + host(joint_noise)
-    root_velocity_noise = rng.normal(0, c.rsi_root_vel, (k, 3))
-    qvel[:, :3] = ref.root_lin_vel[frames].double() + host(root_velocity_noise)
-    qvel[:, 3:6] = rotate_inverse(qpos[:, 3:7].float(), ref.root_ang_vel[frames]).double()
-    joint_velocity_noise = rng.uniform(-c.rsi_joint_vel, c.rsi_joint_vel, (k, joints))
-    qvel[:, dof_idx] = ref.joint_vel[frames].double() + host(joint_velocity_noise)
+    root_noise = normal(k, 3) * c.rsi_root_pos_m
+    root_noise[:, 2] = 0.0
+    qpos[:, :3] = ref.root_pos[frames].double() + root_noise
+    turn = normal(k, 3) * math.radians(c.rsi_root_rot_deg) / math.sqrt(3.0)
+    qpos[:, 3:7] = quat.multiply(quat.from_rotation_vector(turn), ref.root_quat[frames].double())
+    qpos[:, qpos_idx] = ref.joint_pos[frames].double() + uniform(c.rsi_joint_pos, k, joints)
+    qvel[:, :3] = ref.root_lin_vel[frames].double() + normal(k, 3) * c.rsi_root_vel
+    qvel[:, 3:6] = quat.rotate_inverse(qpos[:, 3:7].float(), ref.root_ang_vel[frames]).double()
+    qvel[:, dof_idx] = ref.joint_vel[frames].double() + uniform(c.rsi_joint_vel, k, joints)
     qpos[:, qpos_idx] = torch.clamp(qpos[:, qpos_idx], joint_range[:, 0], joint_range[:, 1])
     return qpos, qvel
 
 
-def _perturb_quat(quat_wxyz: np.ndarray, max_angle: float, rng: np.random.Generator) -> np.ndarray:
-    noise = Rotation.from_rotvec(rng.normal(size=(len(quat_wxyz), 3)) * max_angle / np.sqrt(3))
-    base = Rotation.from_quat(quat_wxyz[:, [1, 2, 3, 0]])
-    return (noise * base).as_quat()[:, [3, 0, 1, 2]]
+def _unit(generator: torch.Generator, device: torch.device, *shape: int) -> torch.Tensor:
+    return torch.rand(*shape, generator=generator, dtype=torch.float64, device=device)

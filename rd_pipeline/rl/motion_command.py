@@ -43,7 +43,6 @@ class MotionCommand:
         self.ref = ReferenceFrames(
             root_pos=tensor(reference.root_pos),
             root_quat=tensor(reference.root_quat),
-            root_quat_host=np.asarray(reference.root_quat, dtype=np.float32),
             root_lin_vel=tensor(reference.body_lin_vel_w[:, root]),
             root_ang_vel=tensor(reference.body_ang_vel_w[:, root]),
             joint_pos=tensor(reference.joint_pos),

@@ -25,3 +25,23 @@ def projected_gravity(quat: torch.Tensor) -> torch.Tensor:
     down = torch.zeros(*quat.shape[:-1], 3, dtype=quat.dtype, device=quat.device)
     down[..., 2] = -1.0
     return rotate_inverse(quat, down)
+
+
+def multiply(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """The rotation `b` then `a`: the Hamilton product a * b of (..., 4) quaternions."""
+    aw = a[..., :1]
+    bw = b[..., :1]
+    av = a[..., 1:]
+    bv = b[..., 1:]
+    w = aw * bw - (av * bv).sum(-1, keepdim=True)
+    v = aw * bv + bw * av + torch.cross(av, bv, dim=-1)
+    return torch.cat([w, v], dim=-1)
+
+
+def from_rotation_vector(rotvec: torch.Tensor) -> torch.Tensor:
+    """(..., 4) unit quaternions of (..., 3) rotation vectors (axis times angle in radians)."""
+    angle = rotvec.norm(dim=-1, keepdim=True)
+    half = 0.5 * angle
+    # sin(x/2)/x -> 1/2 as x -> 0: the series keeps tiny rotations exact.
+    scale = torch.where(angle > 1e-8, torch.sin(half) / angle.clamp(min=1e-8), 0.5 - angle**2 / 48.0)
+    return torch.cat([torch.cos(half), rotvec * scale], dim=-1)
