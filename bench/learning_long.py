@@ -21,27 +21,18 @@ import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from rd_pipeline.api import workspace
 from rd_pipeline.api.workspace import training_runs, training_seconds
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.report import REPORT_MD, SURVIVAL_PLOT
 from rd_pipeline.evaluation.validation_report import ValidationReport
+from rd_pipeline.motion.activity import joint_speed_p95_per_second
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.rl.training_log import read_training_log
 from rd_pipeline.stages.train import CURVE_FILE, PROFILE_FILE
 
 ROBOT = "g1"
-
-
-def joint_speed_p95_per_second(reference: ReferenceMotion) -> list[float]:
-    """How much the reference moves in each second: the 95th percentile of |joint velocity| (rad/s)."""
-    window = round(reference.fps)
-    speeds = np.abs(reference.joint_vel)
-    starts = range(0, reference.n_frames, window)
-    return [round(float(np.percentile(speeds[s : s + window], 95)), 2) for s in starts]
 
 
 def main() -> None:

@@ -1,0 +1,235 @@
+"""Benchmark: a window of dance learned and validated, grown over as many sittings as it takes.
+
+    python bench/dance_window.py [--robot g1] [--motion dance1_subject2] [--clip 11:21 | --busiest 10]
+        [--profile cpu] [--iterations 3300] [--set stage.param=value ...]
+        [--out bench/results/dance_window.json] [--commit SHA]
+    python bench/dance_window.py --profile paper --until train --fill-minutes 6   # a GPU lease
+
+Runs the pipeline as `rd-pipeline run --resume` would: an interrupted training continues from its
+last checkpoint, and a longer `--iterations` grows the finished shorter run. `--busiest N` trains
+the N-second window of the take whose reference joint speed (p95) is the highest.
+`--fill-minutes M` first trains `--probe-iterations`, times them, and grows the run to the
+iterations that fill M minutes (the iteration count, not the clock, keys the artifact).
+
+Unless `--until train`, writes `<out>` with the exported checkpoint's figures on the 500 Hz mesh
+model (`validate`), every scored checkpoint's training-model start-zero survival against samples,
+the survival from each fixed-grid start beside zero action's, the options trained with, and
+`<out stem>_curve.png` (start-zero against samples on a log axis; per-start survival).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+from rd_pipeline.api import workspace
+from rd_pipeline.api.workspace import training_runs
+from rd_pipeline.artifacts.store import MANIFEST
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.evaluation.validation_report import ValidationReport
+from rd_pipeline.motion.activity import busiest_window, joint_speed_p95_per_second
+from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+from rd_pipeline.rl.training_log import read_training_log
+
+OPTIONS = {
+    "backend": ("env", "backend"),
+    "device": ("env", "device"),
+    "num_envs": ("env", "num_envs"),
+    "physics_dt": ("env", "physics_dt"),
+    "decimation": ("env", "decimation"),
+    "solver_iterations": ("env", "solver_iterations"),
+    "ls_iterations": ("env", "ls_iterations"),
+    "action_mode": ("env", "actions", "mode"),
+    "sampler": ("sampler", "mode"),
+    "failure_credit": ("sampler", "failure_credit"),
+    "mixed_precision": ("ppo", "mixed_precision"),
+    "ranks": ("ranks",),
+    "seed": ("seed",),
+}
+"""Result-file name -> path in the train params: the options a reader needs to repeat the run."""
+
+
+def main() -> None:
+    args = _parser().parse_args()
+    try:
+        clip = args.clip or _busiest_clip(args)
+        plan = _plan(args, clip, args.iterations)
+        if args.fill_minutes:
+            plan = _fill(args, clip)
+        workspace.run(plan, resume=True, until=args.until)
+    except PipelineError as exc:
+        sys.exit(f"error: {exc}")
+    if args.until == "train":
+        return
+    result = _result(plan, clip, args.commit or _head_commit())
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    _plot(result, args.out.with_name(f"{args.out.stem}_curve.png"))
+    headline = {key: value for key, value in result.items() if not isinstance(value, (list, dict))}
+    print(json.dumps(headline, indent=2))
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robot", default="g1")
+    parser.add_argument("--motion", default="dance1_subject2")
+    parser.add_argument("--clip", default=None, help="start:end seconds (default: --busiest)")
+    parser.add_argument("--busiest", type=int, default=10, help="window length when --clip is not given")
+    parser.add_argument("--profile", default="cpu")
+    parser.add_argument("--iterations", type=int, default=3300)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--set", nargs="*", default=[], help="further overrides")
+    parser.add_argument("--until", default=None, help="last stage to run (train: no result file)")
+    parser.add_argument("--fill-minutes", type=float, default=None)
+    parser.add_argument("--probe-iterations", type=int, default=5)
+    parser.add_argument("--out", type=Path, default=Path("bench/results/dance_window.json"))
+    parser.add_argument("--commit", default=None, help="the commit the code ran (default: git's HEAD here)")
+    return parser
+
+
+def _plan(args: argparse.Namespace, clip: str, iterations: int) -> workspace.Plan:
+    sets = (f"train.clip={clip}", f"train.iterations={iterations}", *args.set)
+    return workspace.plan(args.robot, args.motion, args.profile, overrides=sets, seed=args.seed)
+
+
+def _busiest_clip(args: argparse.Namespace) -> str:
+    """The `--busiest` window of the whole take's reference (made by the pipeline up to `prior`)."""
+    whole = workspace.plan(args.robot, args.motion, args.profile, seed=args.seed)
+    workspace.run(whole, until="prior", resume=True)
+    source = workspace.artifact(whole, workspace.providing(whole, "reference"))
+    window = busiest_window(ReferenceMotion.load(source / REFERENCE_FILE), args.busiest)
+    print(f"busiest {args.busiest} s window: {window.clip} s, joint speed p95 {window.joint_speed_p95} rad/s")
+    return window.clip
+
+
+def _fill(args: argparse.Namespace, clip: str) -> workspace.Plan:
+    """Train the probe, time its steady iterations and return the plan that fills the minutes."""
+    probe = _plan(args, clip, args.probe_iterations)
+    workspace.run(probe, resume=True, until="train")
+    train = workspace.artifact(probe, "train")
+    rows = read_training_log(train)
+    seconds_per_iteration = statistics.median(row["seconds"] for row in rows[1:])
+    spent = json.loads((train / MANIFEST).read_text())["duration_s"]
+    left = args.fill_minutes * 60 - spent
+    iterations = args.probe_iterations + max(0, int(left / seconds_per_iteration))
+    print(f"probe: {seconds_per_iteration:.2f} s per iteration after {spent:.0f} s; growing to {iterations}")
+    return _plan(args, clip, iterations)
+
+
+def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
+    train = workspace.artifact(plan, "train")
+    export = workspace.artifact(plan, "export")
+    validate = workspace.artifact(plan, "validate")
+    manifest = json.loads((train / MANIFEST).read_text())
+    params = manifest["params"]
+    samples = manifest["metrics"]["samples"]
+    per_iteration = samples / params["iterations"]
+    validation = ValidationReport.load(validate)
+    details = validation.details
+    per_start = {name: details["nominal"][name]["per_start"] for name in ("policy", "zero_action")}
+    reference_clip = details["reference"]
+    source = workspace.artifact(plan, reference_clip["stage"])
+    reference = ReferenceMotion.load(source / REFERENCE_FILE)
+    clipped = reference.frames(reference_clip["start_frame"], reference_clip["end_frame"])
+    return {
+        "robot": plan.robot,
+        "motion": plan.motion,
+        "clip": clip,
+        "samples": samples,
+        "wall_h": round(sum(seconds for _, seconds in training_runs(train)) / 3600, 3),
+        "commit": commit,
+        "start_zero_s": validation.start_zero_survival_s,
+        "mean_survival_s": validation.mean_survival_s,
+        "zero_action_start_zero_s": validation.zero_action_start_zero_survival_s,
+        "E_mpbpe": details["nominal"]["policy"]["fixed_grid"]["E_mpbpe"],
+        "E_mpjpe": validation.E_mpjpe,
+        "checkpoints": [
+            {
+                "iteration": row["iteration"],
+                "samples": round(row["iteration"] * per_iteration),
+                "training_model_start_zero_s": row["start_zero_s"],
+                "training_model_completion": row["completion"],
+            }
+            for row in read_training_log(train)
+            if "start_zero_s" in row
+        ],
+        "exported_checkpoint": json.loads((export / MANIFEST).read_text())["metrics"]["checkpoint_iteration"],
+        "completion_pct": validation.completion_pct,
+        "E_g_mpbpe": validation.E_g_mpbpe,
+        "options": {name: _lookup(params, path) for name, path in OPTIONS.items()},
+        "profile": plan.profile,
+        "wall_h_per_run": {key: round(seconds / 3600, 3) for key, seconds in training_runs(train)},
+        "train_key": manifest["key"],
+        "export_key": details["policy_key"],
+        "fixed_grid_start_s": per_start["policy"]["start_s"],
+        "fixed_grid_survival_s": per_start["policy"]["survival_s"],
+        "fixed_grid_zero_action_survival_s": per_start["zero_action"]["survival_s"],
+        "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(clipped),
+    }
+
+
+def _lookup(params: dict[str, Any], path: tuple[str, ...]) -> Any:
+    value: Any = params
+    for name in path:
+        value = value[name]
+    return value
+
+
+def _plot(result: dict[str, Any], path: Path) -> None:
+    """Start-zero survival against samples (log axis) and survival per fixed-grid start."""
+    figure, (curve, starts) = plt.subplots(1, 2, figsize=(12, 4.2))
+    checkpoints = result["checkpoints"]
+    curve.semilogx(
+        [c["samples"] for c in checkpoints],
+        [c["training_model_start_zero_s"] for c in checkpoints],
+        "o-",
+        ms=3,
+        label="training model, each checkpoint",
+    )
+    exported = next(c for c in checkpoints if c["iteration"] == result["exported_checkpoint"])
+    curve.plot([exported["samples"]], [result["start_zero_s"]], "r*", ms=12, label="exported, 500 Hz mesh model")
+    curve.axhline(result["zero_action_start_zero_s"], color="gray", ls="--", label="zero action")
+    curve.set(
+        xlabel="PPO samples",
+        ylabel="start-zero survival (s)",
+        title=f"{result['robot']} {result['motion']} {result['clip']} s",
+    )
+    curve.legend(fontsize=8)
+    starts.plot(result["fixed_grid_start_s"], result["fixed_grid_survival_s"], "o-", ms=3, label="policy")
+    starts.plot(
+        result["fixed_grid_start_s"],
+        result["fixed_grid_zero_action_survival_s"],
+        "s--",
+        ms=3,
+        color="gray",
+        label="zero action",
+    )
+    starts.set(
+        xlabel="start in clip (s)", ylabel="survival (s)", title="survival per fixed-grid start, 500 Hz mesh model"
+    )
+    starts.legend(fontsize=8)
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def _head_commit() -> str:
+    """The checkout's commit, when this runs from one."""
+    git = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent
+    )
+    return git.stdout.strip() or "unknown"
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,56 @@
+"""How much a reference moves: the measure that tells dance from standing prelude.
+
+A clip of a take can be mostly standing (the 10 s prelude of dance1_subject2 had a joint-speed
+p95 under 1.2 rad/s); a policy that holds it has learned balance, not dance. These figures say
+what a training clip contains and choose the busiest window of a take.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rd_pipeline.motion.reference import ReferenceMotion
+
+
+@dataclass(frozen=True)
+class Window:
+    """A window of a take, in whole seconds, and how fast its joints move."""
+
+    start_s: int
+    """First second of the window."""
+    end_s: int
+    """Second the window ends at (exclusive)."""
+    joint_speed_p95: float
+    """95th percentile of |joint velocity| over the window, rad/s."""
+
+    @property
+    def clip(self) -> str:
+        """The window as `train.clip` takes it ("start:end" in seconds)."""
+        return f"{self.start_s}:{self.end_s}"
+
+
+def joint_speed_p95_per_second(reference: ReferenceMotion) -> list[float]:
+    """The 95th percentile of |joint velocity| (rad/s) in each whole second of `reference`."""
+    window = round(reference.fps)
+    speeds = np.abs(reference.joint_vel)
+    starts = range(0, reference.n_frames, window)
+    return [round(float(np.percentile(speeds[s : s + window], 95)), 2) for s in starts]
+
+
+def busiest_window(reference: ReferenceMotion, seconds: int) -> Window:
+    """The `seconds`-long window, on whole seconds, whose joint-speed p95 is the highest.
+
+    The p95 over the window (not a mean of per-second figures) so that one violent second
+    does not choose a window of standing."""
+    frames_per_s = round(reference.fps)
+    whole_seconds = reference.n_frames // frames_per_s
+    if whole_seconds < seconds:
+        raise ValueError(f"a {seconds} s window does not fit a {reference.duration_s:.1f} s reference")
+    speeds = np.abs(reference.joint_vel)
+    windows = []
+    for start in range(whole_seconds - seconds + 1):
+        frames = speeds[start * frames_per_s : (start + seconds) * frames_per_s]
+        windows.append(Window(start, start + seconds, round(float(np.percentile(frames, 95)), 3)))
+    return max(windows, key=lambda window: window.joint_speed_p95)
