@@ -106,7 +106,7 @@ def _busiest_clip(args: argparse.Namespace) -> str:
     """The `--busiest` window of the whole take's reference (made by the pipeline up to `prior`)."""
     whole = workspace.plan(args.robot, args.motion, args.profile, seed=args.seed)
     workspace.run(whole, until="prior", resume=True)
-    source = workspace.artifact(whole, workspace.providing(whole, "reference"))
+    source = _artifact(whole, workspace.providing(whole, "reference"))
     window = busiest_window(ReferenceMotion.load(source / REFERENCE_FILE), args.busiest)
     print(f"busiest {args.busiest} s window: {window.clip} s, joint speed p95 {window.joint_speed_p95} rad/s")
     return window.clip
@@ -116,7 +116,7 @@ def _fill(args: argparse.Namespace, clip: str) -> workspace.Plan:
     """Train the probe, time its steady iterations and return the plan that fills the minutes."""
     probe = _plan(args, clip, args.probe_iterations)
     workspace.run(probe, resume=True, until="train")
-    train = workspace.artifact(probe, "train")
+    train = _artifact(probe, "train")
     rows = read_training_log(train)
     seconds_per_iteration = statistics.median(row["seconds"] for row in rows[1:])
     spent = json.loads((train / MANIFEST).read_text())["duration_s"]
@@ -127,9 +127,9 @@ def _fill(args: argparse.Namespace, clip: str) -> workspace.Plan:
 
 
 def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
-    train = workspace.artifact(plan, "train")
-    export = workspace.artifact(plan, "export")
-    validate = workspace.artifact(plan, "validate")
+    train = _artifact(plan, "train")
+    export = _artifact(plan, "export")
+    validate = _artifact(plan, "validate")
     manifest = json.loads((train / MANIFEST).read_text())
     params = manifest["params"]
     samples = manifest["metrics"]["samples"]
@@ -138,7 +138,7 @@ def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
     details = validation.details
     per_start = {name: details["nominal"][name]["per_start"] for name in ("policy", "zero_action")}
     reference_clip = details["reference"]
-    source = workspace.artifact(plan, reference_clip["stage"])
+    source = _artifact(plan, reference_clip["stage"])
     reference = ReferenceMotion.load(source / REFERENCE_FILE)
     clipped = reference.frames(reference_clip["start_frame"], reference_clip["end_frame"])
     return {
@@ -147,6 +147,7 @@ def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
         "clip": clip,
         "samples": samples,
         "wall_h": round(sum(seconds for _, seconds in training_runs(train)) / 3600, 3),
+        "samples_per_s_median": manifest["metrics"]["samples_per_s_median"],
         "commit": commit,
         "start_zero_s": validation.start_zero_survival_s,
         "mean_survival_s": validation.mean_survival_s,
@@ -176,6 +177,13 @@ def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
         "fixed_grid_zero_action_survival_s": per_start["zero_action"]["survival_s"],
         "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(clipped),
     }
+
+
+def _artifact(plan: workspace.Plan, stage: str) -> Path:
+    folder = workspace.artifact(plan, stage)
+    if folder is None:
+        raise PipelineError(f"stage '{stage}' has no artifact for {plan.robot}/{plan.motion}")
+    return folder
 
 
 def _lookup(params: dict[str, Any], path: tuple[str, ...]) -> Any:
