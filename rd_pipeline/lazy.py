@@ -4,6 +4,10 @@ Every command plans the whole DAG, so it imports every stage's params; those liv
 (reward terms, samplers). Importing torch there costs seconds that a cached `run --until parse`
 should not pay, so these modules take torch from `lazy_import`: the module object is created at
 once and loaded on its first attribute access (the standard library's `LazyLoader`).
+
+Importing a submodule (`torch.distributed`) of a module still deferred finds it half-loaded: on
+torch 2.11 with Python 3.12.3 that raised an AttributeError, on torch 2.13 with Python 3.11 it
+aborts the process. So code that runs, not plans, calls `load_deferred` first.
 """
 
 from __future__ import annotations
@@ -11,6 +15,9 @@ from __future__ import annotations
 import importlib.util
 import sys
 from types import ModuleType
+
+_deferred: list[ModuleType] = []
+"""Every module `lazy_import` deferred, loaded or not."""
 
 
 def lazy_import(name: str) -> ModuleType:
@@ -25,4 +32,11 @@ def lazy_import(name: str) -> ModuleType:
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     loader.exec_module(module)
+    _deferred.append(module)
     return module
+
+
+def load_deferred() -> None:
+    """Load every deferred module now (any attribute access loads one)."""
+    for module in _deferred:
+        vars(module)

@@ -20,6 +20,7 @@ from rd_pipeline.artifacts.stage import Stage, StageContext, build_params
 from rd_pipeline.artifacts.store import ArtifactRef, ArtifactStore, file_records, write_manifest
 from rd_pipeline.errors import Interrupted, PipelineError
 from rd_pipeline.files import file_sha256
+from rd_pipeline.lazy import load_deferred
 
 SOURCES = ("bvh", "csv")
 
@@ -293,6 +294,7 @@ def _run_stage(
             restart=restart,
             shorter=_shorter_runs(store, entry, robot, pipeline.motion) if resume else (),
         )
+        load_deferred()
         try:
             metrics = stage.run(context)
         except KeyboardInterrupt:

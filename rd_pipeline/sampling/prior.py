@@ -5,7 +5,6 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-import cvxpy as cp
 import numpy as np
 
 from rd_pipeline.errors import PipelineError
@@ -34,6 +33,9 @@ class BalancedPrior:
 
 def solve_balanced_prior(histograms: np.ndarray, lengths: np.ndarray, solver: str) -> BalancedPrior:
     """Fit the stacked per-segment histograms (S, K, B) to a uniform target on the simplex."""
+    # Imported here: training loads a prior without solving one, and needs no cvxpy.
+    import cvxpy as cp
+
     n_segments, n_joints, n_bins = histograms.shape
     H = histograms.reshape(n_segments, -1).T  # (K*B, S): column s is segment s
     U = np.full(n_joints * n_bins, 1.0 / n_bins)

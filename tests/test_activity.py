@@ -1,0 +1,35 @@
+"""How much a reference moves: per-second joint speed and the busiest window of a take."""
+
+import numpy as np
+import pytest
+from conftest import h1_2_dance_reference
+
+from rd_pipeline.motion.activity import busiest_window, joint_speed_p95_per_second
+
+
+@pytest.fixture(scope="module")
+def reference():
+    return h1_2_dance_reference()
+
+
+def test_per_second_speed_sees_the_standing_start_and_end(reference):
+    per_second = joint_speed_p95_per_second(reference)
+    assert len(per_second) == int(np.ceil(reference.duration_s))
+    # dance2_subject4 opens and closes standing still: a few seconds under 0.5 rad/s at each end.
+    assert max(per_second[1:6]) < 0.5
+    assert max(per_second[-8:]) < 0.6
+    assert np.median(per_second) > 4.0
+
+
+def test_busiest_window_is_the_fastest_ten_seconds(reference):
+    window = busiest_window(reference, 10)
+    assert (window.start_s, window.end_s, window.clip) == (193, 203, "193:203")
+    frames = np.abs(reference.joint_vel[193 * 50 : 203 * 50])
+    assert window.joint_speed_p95 == pytest.approx(np.percentile(frames, 95), abs=1e-3)
+    shifted = np.abs(reference.joint_vel[0:500])
+    assert window.joint_speed_p95 > np.percentile(shifted, 95)
+
+
+def test_a_window_longer_than_the_take_is_refused(reference):
+    with pytest.raises(ValueError, match=r"^a 300 s window does not fit a 225.7 s reference$"):
+        busiest_window(reference, 300)
