@@ -167,7 +167,15 @@ class IkConfig:
     refine_iterations: int = 1
     """Iterations per frame of the feet refinement after smoothing."""
     refine_posture_cost: float = 5.0
-    """How strongly the refinement holds joints at their smoothed values."""
+    """How strongly the refinement holds joints at their smoothed values (and the pelvis at its
+    smoothed position, in 1/m)."""
+    pelvis_slack_m: float = 0.03
+    """Where the legs alone cannot keep a planted foot on its target (a knee or hip at its range
+    limit), how far (m, per axis) the pelvis may move from the smoothed motion to take the
+    conflict; the moves are smoothed over `pelvis_slack_smoothing_s` before the legs-only
+    refinement. 0 keeps the pelvis where smoothing put it."""
+    pelvis_slack_smoothing_s: float = 0.1
+    """Gaussian sigma (s) of the pelvis moves that `pelvis_slack_m` allows."""
     lm_damping: float = 1.0
     """Error-scaled damping of the frame tasks: keeps the solve calm near singular arms and legs."""
 

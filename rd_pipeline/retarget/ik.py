@@ -90,24 +90,31 @@ class RetargetIk:
             pose = mink.SE3.from_rotation_and_translation(so3, targets.positions[t, k])
             task.set_target(pose)
 
-    def refine_feet(self, smoothed: np.ndarray, frames: Iterable[int]) -> np.ndarray:
-        """Put the feet of a smoothed trajectory back on their targets, moving the joints only (base fixed).
+    def refine_feet(self, smoothed: np.ndarray, frames: Iterable[int], root_slack_m: float = 0.0) -> np.ndarray:
+        """Put the feet of a smoothed trajectory back on their targets, moving the joints (and the
+        pelvis by up to `root_slack_m` per axis of its position; by default the base stays fixed).
 
-        Each frame starts from the smoothed pose, with the base fixed and a posture task holding
-        every joint near its smoothed value, so the smoothness survives where the feet need no help.
+        Each frame starts from the smoothed pose, with a posture task holding every joint near its
+        smoothed value and a task holding the pelvis at its smoothed position, so the smoothness
+        survives where the feet need no help.
         """
-        feet = set(self.robot.config.foot_bodies)
+        config = self.robot.config
+        feet = set(config.foot_bodies)
         foot_tasks = [task for task, body in zip(self.frame_tasks, self.targets.bodies) if body in feet]
         hold = mink.PostureTask(self.robot.model, cost=self.settings.refine_posture_cost)
+        pelvis = mink.FrameTask(config.root_body, "body", self.settings.refine_posture_cost, 0.0)
+        tasks = [*foot_tasks, hold, pelvis] if root_slack_m > 0 else [*foot_tasks, hold]
+        root_step = np.concatenate([np.full(3, root_slack_m), np.zeros(3)])
         out = smoothed.copy()
         previous = None
         for t in frames:
             self._set_frame_targets(t)
             hold.set_target(smoothed[t])
             self.configuration.update(smoothed[t])
-            self.step_limit.start_frame(previous, np.zeros(6))
+            pelvis.set_target_from_configuration(self.configuration)
+            self.step_limit.start_frame(previous, root_step)
             for _ in range(self.settings.refine_iterations):
-                self._iterate([*foot_tasks, hold])
+                self._iterate(tasks)
             out[t] = self._clipped(self.configuration.q)
             previous = out[t]
         return out

@@ -69,6 +69,8 @@ def retarget(
         close = colliding_frames(robot, smoothed, -clearance)
         keep_ik = np.minimum(smooth_cover(close.astype(float), fps, settings.ik_blend_s), 1.0)
         qpos = blend_configurations(smoothed, qpos, keep_ik)
+        if settings.pelvis_slack_m > 0:
+            qpos = _pelvis_slack(ik, qpos)
         qpos = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames, "feet on the smoothed motion"))
     reference = _reference(robot, qpos, targets)
     # The IK keeps every body above the floor; smoothing can still dip a body by a few millimetres.
@@ -84,6 +86,16 @@ def retarget(
         ground_lift_max_m=float(lift.max()),
         repaired_windows=repaired,
     )
+
+
+def _pelvis_slack(ik: RetargetIk, qpos: np.ndarray) -> np.ndarray:
+    """The trajectory with the pelvis moved, smoothly, where a planted foot needs it to move."""
+    settings = ik.settings
+    reached = ik.refine_feet(qpos, range(len(qpos)), root_slack_m=settings.pelvis_slack_m)
+    sigma = settings.pelvis_slack_smoothing_s * ik.targets.fps
+    moved = qpos.copy()
+    moved[:, :3] += gaussian_filter1d(reached[:, :3] - qpos[:, :3], sigma, axis=0, mode="nearest")
+    return moved
 
 
 def _smooth_trajectory(robot: Robot, qpos: np.ndarray, sigma: float) -> np.ndarray:
