@@ -9,6 +9,7 @@ import numpy as np
 
 from rd_pipeline.retarget.config import LagRepair
 from rd_pipeline.retarget.ik import RetargetIk
+from rd_pipeline.retarget.quality import colliding_frames
 from rd_pipeline.retarget.smoothing import blend_configurations
 
 
@@ -50,7 +51,11 @@ def lagging_windows(errors: np.ndarray, fps: float, repair: LagRepair) -> list[R
 
 
 def repair_lag(ik: RetargetIk, qpos: np.ndarray, repair: LagRepair) -> tuple[np.ndarray, int]:
-    """`qpos` with its lagging stretches re-solved where that lowers their error, and how many were."""
+    """`qpos` with its lagging stretches re-solved where that lowers their error and brings no
+    configured body pair into contact that was not already, and how many were.
+
+    The re-solve keeps its pairs apart, but its fade back into the forward solve blends two
+    configurations: on G1 ground2_subject3 that swung an elbow 8 cm into the torso."""
     errors = ik.keypoint_errors(qpos)
     lag_limit = float(np.median(errors)) + ik.settings.catch_up_margin_m
     out = qpos.copy()
@@ -61,7 +66,8 @@ def repair_lag(ik: RetargetIk, qpos: np.ndarray, repair: LagRepair) -> tuple[np.
         candidate_errors = ik.keypoint_errors(candidate, window.anchor + 1)
         lowers_peak = candidate_errors.max() < errors[span].max()
         lowers_mean = candidate_errors.mean() <= errors[span].mean()
-        if lowers_peak and lowers_mean:
+        touching = colliding_frames(ik.robot, candidate, 0.0) & ~colliding_frames(ik.robot, out[span], 0.0)
+        if lowers_peak and lowers_mean and not touching.any():
             out[span] = candidate
             errors[span] = candidate_errors
             repaired += 1
