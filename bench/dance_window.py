@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
-import subprocess
 import sys
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+from provenance import head_commit
 
 from rd_pipeline.api import workspace
 from rd_pipeline.api.workspace import training_runs
@@ -71,7 +71,7 @@ def main() -> None:
         sys.exit(f"error: {exc}")
     if args.until == "train":
         return
-    result = _result(plan, clip, args.commit or _head_commit())
+    result = _result(plan, clip, args.commit or head_commit())
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     _plot(result, args.out.with_name(f"{args.out.stem}_curve.png"))
@@ -229,14 +229,6 @@ def _plot(result: dict[str, Any], path: Path) -> None:
     figure.tight_layout()
     figure.savefig(path, dpi=110)
     plt.close(figure)
-
-
-def _head_commit() -> str:
-    """The checkout's commit, when this runs from one."""
-    git = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent
-    )
-    return git.stdout.strip() or "unknown"
 
 
 if __name__ == "__main__":

@@ -17,9 +17,10 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
-import subprocess
 import sys
 from pathlib import Path
+
+from provenance import head_commit
 
 from rd_pipeline.api import workspace
 from rd_pipeline.api.workspace import training_runs, training_seconds
@@ -83,7 +84,7 @@ def main() -> None:
         "wall_min": round(training_seconds(train) / 60, 2),
         "wall_min_per_run": {key: round(seconds / 60, 2) for key, seconds in training_runs(train)},
         "samples": trained["samples"],
-        "commit": args.commit or _head_commit(),
+        "commit": args.commit or head_commit(),
         "physics_dt": params["env"]["physics_dt"],
         "decimation": params["env"]["decimation"],
         "solver_iterations": params["env"]["solver_iterations"],
@@ -111,14 +112,6 @@ def main() -> None:
     ):
         shutil.copyfile(source, args.out.parent / f"{args.out.name}{suffix}")
     print(json.dumps(result, indent=2))
-
-
-def _head_commit() -> str:
-    """The checkout's commit, when this runs from one."""
-    git = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent
-    )
-    return git.stdout.strip() or "unknown"
 
 
 if __name__ == "__main__":
