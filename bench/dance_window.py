@@ -67,7 +67,7 @@ def main() -> None:
         if args.fill_minutes:
             plan = _fill(args, clip)
         workspace.run(plan, resume=True, until=args.until)
-    except PipelineError as exc:
+    except (PipelineError, ValueError) as exc:
         sys.exit(f"error: {exc}")
     if args.until == "train":
         return
