@@ -166,6 +166,8 @@ class IkConfig:
     """Gaussian sigma (s) of the final lift that raises bodies the smoothing dipped below the floor."""
     refine_iterations: int = 1
     """Iterations per frame of the feet refinement after smoothing."""
+    refine_correction_rate: float = 10.0
+    """How fast (rad/s) the refinement's correction of each joint may change from frame to frame."""
     refine_posture_cost: float = 5.0
     """How strongly the refinement holds joints at their smoothed values (and the pelvis at its
     smoothed position, in 1/m)."""
@@ -174,6 +176,9 @@ class IkConfig:
     limit), how far (m, per axis) the pelvis may move from the smoothed motion to take the
     conflict; the moves are smoothed over `pelvis_slack_smoothing_s` before the legs-only
     refinement. 0 keeps the pelvis where smoothing put it."""
+    pelvis_slack_trigger_m: float = 0.005
+    """The slack is used only around frames where the legs-only refinement leaves a planted foot
+    farther than this from its target: elsewhere the pelvis stays where smoothing put it."""
     pelvis_slack_smoothing_s: float = 0.1
     """Gaussian sigma (s) of the pelvis moves that `pelvis_slack_m` allows."""
     lm_damping: float = 1.0

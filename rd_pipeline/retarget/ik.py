@@ -55,6 +55,7 @@ class RetargetIk:
         self.tasks = [*self.frame_tasks, self.posture]
         self.damping = weights.damping
         self.key_body_ids = np.array([robot.body_ids[b] for b in targets.bodies])
+        self.target_poses = _target_poses(targets)
 
     def initial_configuration(self) -> np.ndarray:
         """Default pose placed at the first frame's pelvis target."""
@@ -82,17 +83,19 @@ class RetargetIk:
             for task, cost in zip(self.frame_tasks, frame_costs):
                 task.set_position_cost(cost)
             self.applied_costs = frame_costs
-        for k, task in enumerate(self.frame_tasks):
-            rotation = targets.orientations.get(targets.bodies[k])
-            so3 = mink.SO3.identity()
-            if rotation is not None:
-                so3 = mink.SO3.from_matrix(rotation[t])
-            pose = mink.SE3.from_rotation_and_translation(so3, targets.positions[t, k])
-            task.set_target(pose)
+        for task, pose in zip(self.frame_tasks, self.target_poses[t]):
+            task.set_target(mink.SE3(wxyz_xyz=pose))
 
-    def refine_feet(self, smoothed: np.ndarray, frames: Iterable[int], root_slack_m: float = 0.0) -> np.ndarray:
-        """Put the feet of a smoothed trajectory back on their targets, moving the joints (and the
-        pelvis by up to `root_slack_m` per axis of its position; by default the base stays fixed).
+    def refine_feet(
+        self,
+        smoothed: np.ndarray,
+        frames: Iterable[int],
+        root_slack_m: float = 0.0,
+        start: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Put the feet of a smoothed trajectory back on their targets in `frames`, moving the joints
+        (and the pelvis by up to `root_slack_m` per axis of its position; by default the base stays
+        fixed). Rows not in `frames` are copied from `start` (default: `smoothed`).
 
         Each frame starts from the smoothed pose, with a posture task holding every joint near its
         smoothed value and a task holding the pelvis at its smoothed position, so the smoothness
@@ -105,19 +108,41 @@ class RetargetIk:
         pelvis = mink.FrameTask(config.root_body, "body", self.settings.refine_posture_cost, 0.0)
         tasks = [*foot_tasks, hold, pelvis] if root_slack_m > 0 else [*foot_tasks, hold]
         root_step = np.concatenate([np.full(3, root_slack_m), np.zeros(3)])
-        out = smoothed.copy()
-        previous = None
+        joints = self.robot.qpos_indices
+        correction_step = self.settings.refine_correction_rate / self.targets.fps
+        out = (smoothed if start is None else start).copy()
         for t in frames:
             self._set_frame_targets(t)
             hold.set_target(smoothed[t])
             self.configuration.update(smoothed[t])
             pelvis.set_target_from_configuration(self.configuration)
+            previous = out[t - 1] if t > 0 else None
             self.step_limit.start_frame(previous, root_step)
+            if previous is not None:
+                # The correction to the smoothed pose changes gradually: a leg near straight must
+                # not flip to reach a foot target in one frame and back in the next.
+                carried = smoothed[t, joints] + previous[joints] - smoothed[t - 1, joints]
+                self.step_limit.narrow(carried - correction_step, carried + correction_step)
             for _ in range(self.settings.refine_iterations):
                 self._iterate(tasks)
             out[t] = self._clipped(self.configuration.q)
-            previous = out[t]
         return out
+
+    def planted_foot_misses(self, qpos: np.ndarray) -> np.ndarray:
+        """(T,) how far (m) the farthest planted foot of each row of `qpos` is from its target (0 when
+        no foot is planted)."""
+        feet = self.robot.config.foot_bodies
+        columns = [self.targets.bodies.index(foot) for foot in feet]
+        body_ids = [self.robot.body_ids[foot] for foot in feet]
+        misses = np.zeros(len(qpos))
+        for t, q in enumerate(qpos):
+            planted = self.targets.foot_contact[t].astype(bool)
+            if not planted.any():
+                continue
+            self.configuration.update(q)
+            gap = self.configuration.data.xpos[body_ids] - self.targets.positions[t, columns]
+            misses[t] = np.linalg.norm(gap, axis=1)[planted].max()
+        return misses
 
     def _keypoint_error(self, t: int) -> float:
         """Mean distance of the key bodies to their targets in the current configuration."""
@@ -283,6 +308,21 @@ def _frame_tasks(
             )
         )
     return tasks
+
+
+def _target_poses(targets: RetargetTargets) -> np.ndarray:
+    """(T, K, 7) wxyz_xyz target poses of the key bodies; bodies without an orientation target get
+    the identity, which their tasks do not weigh."""
+    poses = np.zeros((targets.n_frames, len(targets.bodies), 7))
+    poses[..., 0] = 1.0
+    poses[..., 4:] = targets.positions
+    for k, body in enumerate(targets.bodies):
+        rotation = targets.orientations.get(body)
+        if rotation is None:
+            continue
+        for t in range(targets.n_frames):
+            mujoco.mju_mat2Quat(poses[t, k, :4], rotation[t].reshape(-1))
+    return poses
 
 
 def _posture_task(robot: Robot, configuration: mink.Configuration, cost: float) -> mink.PostureTask:

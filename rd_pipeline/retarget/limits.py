@@ -46,6 +46,14 @@ class FrameStepLimit(mink.Limit):
         self.lower = np.maximum(self.range_lower, joints - self.max_step)
         self.upper = np.minimum(self.range_upper, joints + self.max_step)
 
+    def narrow(self, lower: np.ndarray, upper: np.ndarray) -> None:
+        """Keep this frame's joints also within [lower, upper], where that band meets the bounds."""
+        narrowed_lower = np.maximum(self.lower, lower)
+        narrowed_upper = np.minimum(self.upper, upper)
+        meets = narrowed_lower <= narrowed_upper
+        self.lower = np.where(meets, narrowed_lower, self.lower)
+        self.upper = np.where(meets, narrowed_upper, self.upper)
+
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt  # bounds are on the displacement itself
         joints = configuration.q[self.qpos_indices]

@@ -6,7 +6,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
+from scipy.ndimage import binary_dilation, gaussian_filter1d
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
@@ -69,9 +69,10 @@ def retarget(
         close = colliding_frames(robot, smoothed, -clearance)
         keep_ik = np.minimum(smooth_cover(close.astype(float), fps, settings.ik_blend_s), 1.0)
         qpos = blend_configurations(smoothed, qpos, keep_ik)
+        refined = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames, "feet on the smoothed motion"))
         if settings.pelvis_slack_m > 0:
-            qpos = _pelvis_slack(ik, qpos)
-        qpos = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames, "feet on the smoothed motion"))
+            refined = _pelvis_slack(ik, qpos, refined)
+        qpos = refined
     reference = _reference(robot, qpos, targets)
     # The IK keeps every body above the floor; smoothing can still dip a body by a few millimetres.
     lowest = hulls.lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
@@ -88,14 +89,22 @@ def retarget(
     )
 
 
-def _pelvis_slack(ik: RetargetIk, qpos: np.ndarray) -> np.ndarray:
-    """The trajectory with the pelvis moved, smoothly, where a planted foot needs it to move."""
+def _pelvis_slack(ik: RetargetIk, smoothed: np.ndarray, refined: np.ndarray) -> np.ndarray:
+    """`refined` with the pelvis moved, smoothly, around the frames where the legs alone left a
+    planted foot off its target (a knee or hip at its range limit), and the feet refined again there."""
     settings = ik.settings
-    reached = ik.refine_feet(qpos, range(len(qpos)), root_slack_m=settings.pelvis_slack_m)
+    conflict = ik.planted_foot_misses(refined) > settings.pelvis_slack_trigger_m
+    if not conflict.any():
+        return refined
     sigma = settings.pelvis_slack_smoothing_s * ik.targets.fps
-    moved = qpos.copy()
-    moved[:, :3] += gaussian_filter1d(reached[:, :3] - qpos[:, :3], sigma, axis=0, mode="nearest")
-    return moved
+    # The smoothed moves spread over a few sigma: the pelvis may already move there.
+    around = binary_dilation(conflict, iterations=max(1, round(2 * sigma)))
+    reached = ik.refine_feet(smoothed, np.flatnonzero(around), root_slack_m=settings.pelvis_slack_m)
+    shift = gaussian_filter1d(reached[:, :3] - smoothed[:, :3], sigma, axis=0, mode="nearest")
+    moved = smoothed.copy()
+    moved[:, :3] += shift
+    changed = np.flatnonzero(np.any(shift != 0.0, axis=1))
+    return ik.refine_feet(moved, changed, start=refined)
 
 
 def _smooth_trajectory(robot: Robot, qpos: np.ndarray, sigma: float) -> np.ndarray:
