@@ -51,6 +51,7 @@ class RetargetIk:
         self.floor_raise = _swing_floor_raise(targets, hulls, config.foot_bodies, settings.swing_floor_fraction)
         self.collision_pairs = collision_geom_pairs(robot)
         self.pair_reach = model.geom_rbound[self.collision_pairs].sum(axis=1)
+        self.depth_known_at: tuple[np.ndarray, float] | None = None
         self.limits = _limits(robot, self.step_limit, self.floor, settings)
         self.tasks = [*self.frame_tasks, self.posture]
         self.damping = weights.damping
@@ -175,6 +176,15 @@ class RetargetIk:
 
     def _pair_depth(self) -> float:
         """How deep the configured body pairs interpenetrate (m; 0 when none touch)."""
+        q = self.configuration.q
+        # An iteration starts where the last one ended: its depth is known.
+        if self.depth_known_at is not None and np.array_equal(q, self.depth_known_at[0]):
+            return self.depth_known_at[1]
+        depth = self._measure_pair_depth()
+        self.depth_known_at = (q.copy(), depth)
+        return depth
+
+    def _measure_pair_depth(self) -> float:
         data = self.configuration.data
         pairs = self.collision_pairs
         if len(pairs) == 0:
