@@ -9,36 +9,53 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pytest
 from conftest import LAFAN_DIR
 
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
 from rd_pipeline.retarget.config import RetargetConfig
-from rd_pipeline.retarget.quality import retarget_quality
-from rd_pipeline.retarget.retarget import retarget
+from rd_pipeline.retarget.quality import FootMeshes, QualityThresholds, retarget_quality
+from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.robots import load_robot
 
 WINDOW_S = (96, 140)
 """Floor work of ground2_subject2 (kneeling, sitting, getting up) where H1 skated 57 mm/s."""
+GETTING_UP_S = (62, 72)
+"""G1 getting up in fallAndGetUp3_subject1, where the refinement once flipped a near-straight
+leg by 0.55 rad for a single frame to reach a foot target."""
+
+
+def _retarget(robot_name: str, take: str, window_s: tuple[float, float], **ik: float) -> RetargetResult:
+    clip = human_motion_from_bvh(read_bvh(LAFAN_DIR / f"{take}.bvh"), LAFAN_CM_TO_M, LAFAN_TO_Z_UP)
+    first, end = (round(s * clip.fps) for s in window_s)
+    window = dataclasses.replace(clip, pos_w=clip.pos_w[first:end], quat_w=clip.quat_w[first:end])
+    defaults = RetargetConfig()
+    params = dataclasses.replace(defaults, ik=dataclasses.replace(defaults.ik, **ik))
+    return retarget(window, load_robot(robot_name), params)
 
 
 def _quality(slack_m: float) -> dict:
-    clip = human_motion_from_bvh(read_bvh(LAFAN_DIR / "ground2_subject2.bvh"), LAFAN_CM_TO_M, LAFAN_TO_Z_UP)
-    first, end = (round(s * clip.fps) for s in WINDOW_S)
-    window = dataclasses.replace(clip, pos_w=clip.pos_w[first:end], quat_w=clip.quat_w[first:end])
-    defaults = RetargetConfig()
-    params = dataclasses.replace(defaults, ik=dataclasses.replace(defaults.ik, pelvis_slack_m=slack_m))
-    robot = load_robot("h1")
-    result = retarget(window, robot, params)
+    result = _retarget("h1", "ground2_subject2", WINDOW_S, pelvis_slack_m=slack_m)
     targets = result.targets
     return retarget_quality(
-        robot,
+        load_robot("h1"),
         result.reference,
         keypoint_targets=targets.positions,
         keypoint_bodies=targets.bodies,
         human_pelvis=targets.human_pelvis,
     )
+
+
+def _fastest_standing_foot(result: RetargetResult) -> float:
+    """The highest horizontal speed (m/s) of a foot whose sole is on the floor."""
+    reference = result.reference
+    robot = load_robot("g1")
+    soles = FootMeshes.from_robot(robot).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
+    feet = [reference.body_names.index(foot) for foot in robot.config.foot_bodies]
+    speed = np.linalg.norm(np.gradient(reference.body_pos_w[:, feet, :2], 1.0 / reference.fps, axis=0), axis=-1)
+    return float(speed[soles < QualityThresholds().ground_contact_height_m].max())
 
 
 @pytest.fixture(scope="module")
@@ -62,3 +79,11 @@ def test_pelvis_slack_keeps_planted_feet_within_half_the_slide(fixed_pelvis, sla
     assert slack_pelvis["jerk_mean"] < fixed_pelvis["jerk_mean"]
     for name in ("joint_limit_violations", "velocity_limit_violations", "self_collision_frames"):
         assert slack_pelvis[name] == 0, name
+
+
+def test_the_feet_correction_changes_gradually():
+    assert RetargetConfig().ik.refine_correction_rate == 10.0
+    flipping = _retarget("g1", "fallAndGetUp3_subject1", GETTING_UP_S, refine_correction_rate=1e4)
+    gradual = _retarget("g1", "fallAndGetUp3_subject1", GETTING_UP_S)
+    assert _fastest_standing_foot(flipping) > 2.0
+    assert _fastest_standing_foot(gradual) < 0.5
