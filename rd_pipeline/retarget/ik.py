@@ -75,7 +75,6 @@ class RetargetIk:
         return q
 
     def _set_frame_targets(self, t: int) -> None:
-        targets = self.targets
         self.floor.raise_bodies(self.floor_raise[t])
         # Frames are visited in any order (the lag repair solves backward), so the costs to compare
         # with are the ones the tasks hold, not the previous frame's.
