@@ -9,14 +9,13 @@ from __future__ import annotations
 
 import dataclasses
 
-import numpy as np
 import pytest
 from conftest import LAFAN_DIR
 
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
 from rd_pipeline.retarget.config import RetargetConfig
-from rd_pipeline.retarget.quality import FootMeshes, QualityThresholds, retarget_quality
+from rd_pipeline.retarget.quality import QualityThresholds, retarget_quality, sole_heights_and_speeds
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.robots import load_robot
 
@@ -50,11 +49,7 @@ def _quality(slack_m: float) -> dict:
 
 def _fastest_standing_foot(result: RetargetResult) -> float:
     """The highest horizontal speed (m/s) of a foot whose sole is on the floor."""
-    reference = result.reference
-    robot = load_robot("g1")
-    soles = FootMeshes.from_robot(robot).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
-    feet = [reference.body_names.index(foot) for foot in robot.config.foot_bodies]
-    speed = np.linalg.norm(np.gradient(reference.body_pos_w[:, feet, :2], 1.0 / reference.fps, axis=0), axis=-1)
+    soles, speed = sole_heights_and_speeds(load_robot("g1"), result.reference)
     return float(speed[soles < QualityThresholds().ground_contact_height_m].max())
 
 

@@ -170,10 +170,8 @@ def summarize_quality(
 ) -> dict[str, float | int | str | dict[str, int] | None]:
     """`retarget_quality` from per-frame rulers already computed by `quality_series`."""
     dt = 1.0 / reference.fps
-    feet = FootMeshes.from_robot(robot).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
+    feet, foot_speed = sole_heights_and_speeds(robot, reference)
     feet_penetration = np.maximum(0.0, -feet).max(axis=1)
-    foot_index = [reference.body_names.index(b) for b in robot.config.foot_bodies]
-    foot_speed = np.linalg.norm(_gradient(reference.body_pos_w[:, foot_index, :2], dt), axis=-1)
     stance = feet < thresholds.ground_contact_height_m
     skate = float(foot_speed[stance].mean()) if stance.any() else 0.0
     penetration = series["penetration_m"]
@@ -207,6 +205,15 @@ def summarize_quality(
         "human_root_speed_p999_m_s": None if human_speed is None else _round(np.percentile(human_speed, 99.9)),
         "planted_foot_turn_p95_deg": _planted_turn_p95(foot_turn),
     }
+
+
+def sole_heights_and_speeds(robot: Robot, reference: ReferenceMotion) -> tuple[np.ndarray, np.ndarray]:
+    """(T, 2) lowest sole point (m) and horizontal speed (m/s) of the left and right foot: a foot
+    skates where it moves while its sole is below `ground_contact_height_m`."""
+    soles = FootMeshes.from_robot(robot).lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
+    feet = [reference.body_names.index(body) for body in robot.config.foot_bodies]
+    speed = np.linalg.norm(_gradient(reference.body_pos_w[:, feet, :2], 1.0 / reference.fps), axis=-1)
+    return soles, speed
 
 
 def diverged(keypoint_error: np.ndarray, thresholds: QualityThresholds) -> np.ndarray:
