@@ -105,8 +105,11 @@ class RetargetIk:
         feet = set(config.foot_bodies)
         foot_tasks = [task for task, body in zip(self.frame_tasks, self.targets.bodies) if body in feet]
         hold = mink.PostureTask(self.robot.model, cost=self.settings.refine_posture_cost)
-        pelvis = mink.FrameTask(config.root_body, "body", self.settings.refine_posture_cost, 0.0)
-        tasks = [*foot_tasks, hold, pelvis] if root_slack_m > 0 else [*foot_tasks, hold]
+        tasks: list[mink.Task] = [*foot_tasks, hold]
+        pelvis = None
+        if root_slack_m > 0:
+            pelvis = mink.FrameTask(config.root_body, "body", self.settings.refine_posture_cost, 0.0)
+            tasks.append(pelvis)
         root_step = np.concatenate([np.full(3, root_slack_m), np.zeros(3)])
         joints = self.robot.qpos_indices
         correction_step = self.settings.refine_correction_rate / self.targets.fps
@@ -115,7 +118,8 @@ class RetargetIk:
             self._set_frame_targets(t)
             hold.set_target(smoothed[t])
             self.configuration.update(smoothed[t])
-            pelvis.set_target_from_configuration(self.configuration)
+            if pelvis is not None:
+                pelvis.set_target_from_configuration(self.configuration)
             previous = out[t - 1] if t > 0 else None
             self.step_limit.start_frame(previous, root_step)
             if previous is not None:
