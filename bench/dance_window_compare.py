@@ -22,7 +22,7 @@ import matplotlib.pyplot as plt
 
 RESULTS = Path(__file__).parent / "results"
 DEFAULT_RUNS = ("dance_window.json", "dance_window_gpu_lease1.json", "dance_window_gpu.json")
-BUDGETS_M = (10, 20, 50, 100)
+BUDGETS_M = (10, 20, 30, 50, 100)
 """Sample budgets (millions) at which the runs are compared."""
 
 
