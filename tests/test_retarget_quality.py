@@ -266,6 +266,14 @@ def test_knees_through_the_floor_are_seen_with_feet_clear(g1) -> None:
     assert quality["feet_penetration_max_mm"] == 0.0
     assert quality["penetration_max_mm"] > 100.0
     assert quality["penetration_max_mm"] == pytest.approx(-1000.0 * lowest.min(), abs=1e-3)
+    sink = hulls.sink_depth(reference.body_pos_w, reference.body_quat_w, reference.body_names)
+    np.testing.assert_allclose(sink, np.maximum(-lowest.min(axis=1), 0.0), rtol=0, atol=1e-12)
+    # Every other frame two metres up: only the frames left on the floor sink.
+    lift = np.zeros_like(reference.body_pos_w)
+    lift[::2, :, 2] = 2.0
+    mixed = hulls.sink_depth(reference.body_pos_w + lift, reference.body_quat_w, reference.body_names)
+    assert not mixed[::2].any()
+    np.testing.assert_allclose(mixed[1::2], sink[1::2], rtol=0, atol=1e-12)
     legs = {f"{side}_{link}" for side in ("left", "right") for link in ("hip_yaw_link", "knee_link")}
     assert quality["penetration_deepest_body"] in legs
     assert quality_series(g1, reference)["penetration_m"].shape == (n_frames,)

@@ -26,9 +26,8 @@ class FloorLimit(mink.Limit):
         self.body_ids = hulls.body_ids
         self.points = hulls.points
         self.radii = hulls.radii
-        # No point of a body is farther from its origin than this: bodies whose origin is higher
-        # above the floor need no closer look.
-        self.reach = np.array([np.max(np.linalg.norm(p, axis=1) + r) for p, r in zip(hulls.points, hulls.radii)])
+        # Bodies whose origin is higher above the floor than their reach need no closer look.
+        self.reach = hulls.reach
         self.jacobian = np.zeros((3, model.nv))
         self.extra = np.zeros(len(self.body_ids))
 

@@ -75,8 +75,7 @@ def retarget(
         qpos = refined
     reference = _reference(robot, qpos, targets)
     # The IK keeps every body above the floor; smoothing can still dip a body by a few millimetres.
-    lowest = hulls.lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
-    sink = np.maximum(-lowest.min(axis=1), 0.0)
+    sink = hulls.sink_depth(reference.body_pos_w, reference.body_quat_w, reference.body_names)
     lift = smooth_cover(sink, fps, settings.ground_lift_smoothing_s)
     if lift.any():
         qpos[:, 2] += lift

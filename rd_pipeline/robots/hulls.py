@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import mujoco
 import numpy as np
@@ -55,6 +56,26 @@ class BodyHulls:
             points.append(np.concatenate([p for p, _ in support]))
             radii.append(np.concatenate([r for _, r in support]))
         return cls(tuple(names), np.array(ids), tuple(points), tuple(radii))
+
+    @cached_property
+    def reach(self) -> np.ndarray:
+        """(N,) how far each body's geometry reaches from its origin, radius included: a body whose
+        origin is higher above the floor than this cannot touch it."""
+        return np.array([np.max(np.linalg.norm(p, axis=1) + r) for p, r in zip(self.points, self.radii)])
+
+    def sink_depth(self, body_pos_w: np.ndarray, body_quat_w: np.ndarray, body_names: Sequence[str]) -> np.ndarray:
+        """(T,) how far the deepest body reaches below the floor (0 where none does), from body poses
+        (T, B, 3), (T, B, 4 wxyz): `lowest_z`'s minimum clipped at 0, with each body's points only
+        looked at in the frames where its origin is within its reach of the floor."""
+        index = {name: i for i, name in enumerate(body_names)}
+        depth = np.zeros(body_pos_w.shape[0])
+        for k, (body, points, radii) in enumerate(zip(self.body_names, self.points, self.radii)):
+            i = index[body]
+            near = np.flatnonzero(body_pos_w[:, i, 2] < self.reach[k])
+            if near.size:
+                lowest = support_lowest_z(body_pos_w[near, i], body_quat_w[near, i], points, radii)
+                depth[near] = np.maximum(depth[near], -lowest)
+        return depth
 
     def lowest_z(self, body_pos_w: np.ndarray, body_quat_w: np.ndarray, body_names: Sequence[str]) -> np.ndarray:
         """(T, N) lowest world z of each body's collision geometry from body poses (T, B, 3), (T, B, 4 wxyz)."""
