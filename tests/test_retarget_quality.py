@@ -15,6 +15,7 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
+from rd_pipeline.retarget.floor import FloorLimit
 from rd_pipeline.retarget.quality import FootMeshes, QualityThresholds, quality_series, retarget_quality
 from rd_pipeline.robots import Robot, load_robot
 from rd_pipeline.robots.config import available_robots
@@ -242,6 +243,38 @@ def test_body_hulls_match_posed_geometry(name: str) -> None:
                 geoms |= {g for g in range(model.ngeom) if model.geom_bodyid[g] == body and model.geom_dataid[g] >= 0}
             exact = min(_exact_lowest_z(model, data, g) for g in geoms)
             assert ours[0, k] == pytest.approx(exact, abs=1e-3)
+
+
+@pytest.mark.parametrize("name", ["g1", "h1"])
+def test_floor_limit_scans_every_body_that_can_reach_the_floor(name: str) -> None:
+    """On random poses from lying to standing: no body's lowest point is below its `lowest_bound`,
+    the bound skips bodies, and the floor limit's lowest points are a full scan's wherever a body
+    can come within the asked distance of the floor (the others cannot)."""
+    robot = load_robot(name)
+    model = robot.model
+    data = mujoco.MjData(model)
+    hulls = BodyHulls.from_robot(robot)
+    floor = FloorLimit(model, hulls, clearance_m=0.005, detection_m=0.05)
+    within = 0.06
+    rng = np.random.default_rng(1)
+    names = [model.body(b).name for b in range(1, model.nbody)]
+    skipped = 0
+    for height in np.linspace(0.1, 1.1, 12):
+        quat = rng.normal(size=4)
+        data.qpos[:3] = [0.0, 0.0, height]
+        data.qpos[3:7] = quat / np.linalg.norm(quat)
+        low, high = robot.joint_range.T
+        data.qpos[robot.qpos_indices] = rng.uniform(low, high)
+        mujoco.mj_kinematics(model, data)
+        full = hulls.lowest_z(data.xpos[None, 1:], data.xquat[None, 1:], names)[0]
+        bound = hulls.lowest_bound(data.xpos[hulls.body_ids, 2], data.xmat[hulls.body_ids, 6:9])
+        assert np.all(bound <= full + 1e-9)
+        lowest, index = floor.lowest_points(data, within)
+        scanned = index >= 0
+        np.testing.assert_allclose(lowest[scanned], full[scanned], rtol=0, atol=1e-12)
+        assert np.all(full[~scanned] >= within)
+        skipped += int((~scanned).sum())
+    assert skipped > 0
 
 
 def test_knees_through_the_floor_are_seen_with_feet_clear(g1) -> None:

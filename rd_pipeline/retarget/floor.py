@@ -24,10 +24,9 @@ class FloorLimit(mink.Limit):
         self.detection = detection_m
         self.relaxed = False
         self.body_ids = hulls.body_ids
+        self.hulls = hulls
         self.points = hulls.points
         self.radii = hulls.radii
-        # Bodies whose origin is higher above the floor than their reach need no closer look.
-        self.reach = hulls.reach
         self.jacobian = np.zeros((3, model.nv))
         self.extra = np.zeros(len(self.body_ids))
 
@@ -38,11 +37,11 @@ class FloorLimit(mink.Limit):
     def lowest_points(self, data: mujoco.MjData, within_m: float = np.inf) -> tuple[np.ndarray, np.ndarray]:
         """Per body: the world z of its lowest support point (radius included) and that point's index.
 
-        Bodies that cannot come within `within_m` of the floor report their origin's height bound
-        and index -1.
+        Bodies that cannot come within `within_m` of the floor report the bound that says so
+        (`BodyHulls.lowest_bound`) and index -1.
         """
         origin_z = data.xpos[self.body_ids, 2]
-        lowest = origin_z - self.reach
+        lowest = self.hulls.lowest_bound(origin_z, data.xmat[self.body_ids, 6:9])
         index = np.full(len(self.body_ids), -1)
         for k in np.flatnonzero(lowest < within_m):
             z_row = data.xmat[self.body_ids[k], 6:9]

@@ -63,17 +63,35 @@ class BodyHulls:
         origin is higher above the floor than this cannot touch it."""
         return np.array([np.max(np.linalg.norm(p, axis=1) + r) for p, r in zip(self.points, self.radii)])
 
+    @cached_property
+    def boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per body, the centre (N, 3) and half extents (N, 3) of the box in its frame that holds
+        every support point grown by its radius."""
+        low = np.array([(p - r[:, None]).min(axis=0) for p, r in zip(self.points, self.radii)])
+        high = np.array([(p + r[:, None]).max(axis=0) for p, r in zip(self.points, self.radii)])
+        return (low + high) / 2.0, (high - low) / 2.0
+
+    def lowest_bound(self, origin_z: np.ndarray, z_rows: np.ndarray) -> np.ndarray:
+        """(..., N) a lower bound of each body's lowest world z, from its origin's height (..., N) and
+        the world z of its axes (..., N, 3): the lowest corner of its box, or its reach below the
+        origin, whichever is higher. Exact support points are never below it."""
+        centre, half = self.boxes
+        box = (z_rows * centre).sum(axis=-1) - (np.abs(z_rows) * half).sum(axis=-1)
+        return origin_z + np.maximum(box, -self.reach)
+
     def sink_depth(self, body_pos_w: np.ndarray, body_quat_w: np.ndarray, body_names: Sequence[str]) -> np.ndarray:
         """(T,) how far the deepest body reaches below the floor (0 where none does), from body poses
         (T, B, 3), (T, B, 4 wxyz): `lowest_z`'s minimum clipped at 0, with each body's points only
-        looked at in the frames where its origin is within its reach of the floor."""
-        index = {name: i for i, name in enumerate(body_names)}
+        looked at in the frames where its `lowest_bound` is below the floor."""
+        columns = [list(body_names).index(body) for body in self.body_names]
+        pos = body_pos_w[:, columns]
+        quat = body_quat_w[:, columns]
+        bound = self.lowest_bound(pos[..., 2], _rotation_z_row(quat))
         depth = np.zeros(body_pos_w.shape[0])
-        for k, (body, points, radii) in enumerate(zip(self.body_names, self.points, self.radii)):
-            i = index[body]
-            near = np.flatnonzero(body_pos_w[:, i, 2] < self.reach[k])
+        for k, (points, radii) in enumerate(zip(self.points, self.radii)):
+            near = np.flatnonzero(bound[:, k] < 0.0)
             if near.size:
-                lowest = support_lowest_z(body_pos_w[near, i], body_quat_w[near, i], points, radii)
+                lowest = support_lowest_z(pos[near, k], quat[near, k], points, radii)
                 depth[near] = np.maximum(depth[near], -lowest)
         return depth
 
