@@ -41,11 +41,11 @@ class FloorLimit(mink.Limit):
         (`BodyHulls.lowest_bound`) and index -1.
         """
         origin_z = data.xpos[self.body_ids, 2]
-        lowest = self.hulls.lowest_bound(origin_z, data.xmat[self.body_ids, 6:9])
+        z_rows = data.xmat[self.body_ids, 6:9]
+        lowest = self.hulls.lowest_bound(origin_z, z_rows)
         index = np.full(len(self.body_ids), -1)
         for k in np.flatnonzero(lowest < within_m):
-            z_row = data.xmat[self.body_ids[k], 6:9]
-            z = origin_z[k] + self.points[k] @ z_row - self.radii[k]
+            z = origin_z[k] + self.points[k] @ z_rows[k] - self.radii[k]
             index[k] = int(np.argmin(z))
             lowest[k] = z[index[k]]
         return lowest, index
