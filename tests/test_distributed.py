@@ -105,3 +105,47 @@ def test_nproc_runs_the_train_stage_as_that_many_ranks(artifacts: Path) -> None:
     refused = cli("run", "--until", "train", "--source", "csv", "--nproc", "0")
     assert refused.returncode == 2
     assert refused.stderr.strip().splitlines()[-1] == "error: parameter 'train.ranks' must be positive, got 0"
+
+
+class _ScriptedRun:
+    """Stands in for the rank processes: each poll runs the next step on the log; the last ends it."""
+
+    def __init__(self, steps: list) -> None:
+        self.steps = steps
+
+    def poll(self) -> int | None:
+        self.steps.pop(0)()
+        return None if self.steps else 0
+
+
+def test_a_resumed_run_is_followed_by_iteration_from_its_checkpoint(tmp_path: Path, monkeypatch) -> None:
+    # The interrupted run logged iterations 1-5 but checkpointed after 3; the resumed run rewrites
+    # the log up to 3 (a new file), logs 4 and 5 again, and 6 arrives in two writes. Following by
+    # line count handed only 6.
+    from rd_pipeline.rl import launch
+
+    monkeypatch.setattr(launch, "POLL_S", 0.0)
+    log = tmp_path / "training_log.jsonl"
+
+    def rows(*iterations: int) -> str:
+        return "".join(json.dumps({"iteration": i}) + "\n" for i in iterations)
+
+    log.write_text(rows(1, 2, 3, 4, 5))
+    rewritten = tmp_path / "rewritten"
+
+    def rewrite() -> None:
+        rewritten.write_text(rows(1, 2, 3))
+        rewritten.replace(log)
+
+    def append(text: str):
+        def write() -> None:
+            with log.open("a") as file:
+                file.write(text)
+
+        return write
+
+    run = _ScriptedRun([rewrite, append(rows(4, 5) + '{"itera'), append('tion": 6}\n')])
+    handed: list[int] = []
+    followed = launch._follow_log(log, run, lambda row: handed.append(row["iteration"]), after=3)
+    assert handed == [4, 5, 6]
+    assert followed == 3

@@ -23,7 +23,7 @@ import torch
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.rl.distributed import join_process_group, leave_process_group
 from rd_pipeline.rl.runner import TrainingJob, TrainingOutcome, run_job
-from rd_pipeline.rl.training_log import LOG_FILE
+from rd_pipeline.rl.training_log import LOG_FILE, checkpoint_iteration
 
 POLL_S = 1.0
 """How often the stage process reads the log of running ranks."""
@@ -56,7 +56,8 @@ def train_in_processes(job: TrainingJob, on_iteration: Callable[[dict], None]) -
     command = torchrun_command(job_file, job.config.ranks)
     with output_file.open("w") as output:
         process = subprocess.Popen(command, stdout=output, stderr=subprocess.STDOUT)
-        followed = _follow_log(job.work / LOG_FILE, process, on_iteration)
+        resumed_at = 0 if job.checkpoint is None else checkpoint_iteration(job.checkpoint)
+        followed = _follow_log(job.work / LOG_FILE, process, on_iteration, resumed_at)
     machine = os.environ.get("PET_NODE_RANK", "0")
     if process.returncode == 0 and machine != "0":
         raise PipelineError(
@@ -74,22 +75,54 @@ def train_in_processes(job: TrainingJob, on_iteration: Callable[[dict], None]) -
     return outcome
 
 
-def _follow_log(log: Path, process: subprocess.Popen, on_iteration: Callable[[dict], None]) -> int:
-    """Hand each new complete log line to `on_iteration` until `process` ends; returns how many."""
-    seen = len(log.read_text().splitlines()) if log.exists() else 0
+def _follow_log(log: Path, process: subprocess.Popen, on_iteration: Callable[[dict], None], after: int) -> int:
+    """Hand each log row of an iteration past `after` to `on_iteration`, once and in order, until
+    `process` ends; returns how many.
+
+    Each poll reads only what was appended since the last one. A resumed run first rewrites the log
+    up to its checkpoint (a new file) and then logs the iterations after it again: rows are told
+    apart by their iteration, so none is handed twice and none is skipped.
+    """
+    handed = after
     followed = 0
+    tail = _LogTail(log)
     while True:
         finished = process.poll() is not None
-        lines = log.read_text().splitlines(keepends=True) if log.exists() else []
-        for line in lines[seen:]:
-            if not line.endswith("\n"):
-                break
-            on_iteration(json.loads(line))
-            seen += 1
+        for row in tail.new_rows():
+            if row["iteration"] <= handed:
+                continue
+            on_iteration(row)
+            handed = row["iteration"]
             followed += 1
         if finished:
             return followed
         time.sleep(POLL_S)
+
+
+class _LogTail:
+    """The complete lines appended to a file since the last read; a file replaced under the same
+    name is read again from its start."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.inode: int | None = None
+        self.offset = 0
+
+    def new_rows(self) -> list[dict]:
+        try:
+            inode = self.path.stat().st_ino
+        except FileNotFoundError:
+            return []
+        if inode != self.inode:
+            self.inode = inode
+            self.offset = 0
+        with self.path.open("rb") as file:
+            file.seek(self.offset)
+            appended = file.read()
+        # A line still being written waits for the next poll.
+        complete = appended[: appended.rfind(b"\n") + 1]
+        self.offset += len(complete)
+        return [json.loads(line) for line in complete.splitlines()]
 
 
 def _rank_main(job_file: Path) -> None:
