@@ -149,3 +149,19 @@ def test_a_resumed_run_is_followed_by_iteration_from_its_checkpoint(tmp_path: Pa
     followed = launch._follow_log(log, run, lambda row: handed.append(row["iteration"]), after=3)
     assert handed == [4, 5, 6]
     assert followed == 3
+
+
+def test_a_machine_whose_share_is_done_exits_0_with_one_line(monkeypatch, capsys) -> None:
+    # Machines other than 0 of a multi-machine run finish their ranks without writing the
+    # artifact: that is their job done, not an error (it exited 2 as one).
+    from rd_pipeline.cli import app, commands
+    from rd_pipeline.errors import ShareDone
+
+    line = "train: the ranks of machine 1 finished; machine 0 (PET_NODE_RANK=0) writes the artifact"
+
+    def share_done(command, console) -> int:
+        raise ShareDone(line)
+
+    monkeypatch.setattr(commands, "run", share_done)
+    assert app.main(["run", "--robot", "g1", "--motion", "dance1_subject2"]) == 0
+    assert capsys.readouterr().err.strip() == f"done: {line}"

@@ -24,7 +24,7 @@ from rd_pipeline.cli.args import (
     Sweep,
     View,
 )
-from rd_pipeline.errors import Interrupted, PipelineError
+from rd_pipeline.errors import Interrupted, PipelineError, ShareDone
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -53,6 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     except PipelineError as exc:
         console.print(f"[red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
         return 2
+    except ShareDone as exc:
+        console.print(f"done: {escape(str(exc))}", highlight=False, soft_wrap=True)
+        return 0
     except Interrupted as exc:
         console.print(f"[red]interrupted[/]: no partial artifact was kept; {escape(str(exc))}")
         return 130

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import torch
 
-from rd_pipeline.errors import PipelineError
+from rd_pipeline.errors import PipelineError, ShareDone
 from rd_pipeline.rl.distributed import join_process_group, leave_process_group
 from rd_pipeline.rl.runner import TrainingJob, TrainingOutcome, run_job
 from rd_pipeline.rl.training_log import LOG_FILE, checkpoint_iteration
@@ -60,7 +60,7 @@ def train_in_processes(job: TrainingJob, on_iteration: Callable[[dict], None]) -
         followed = _follow_log(job.work / LOG_FILE, process, on_iteration, resumed_at)
     machine = os.environ.get("PET_NODE_RANK", "0")
     if process.returncode == 0 and machine != "0":
-        raise PipelineError(
+        raise ShareDone(
             f"train: the ranks of machine {machine} finished; machine 0 (PET_NODE_RANK=0) writes the artifact"
         )
     if process.returncode != 0 or not outcome_file.exists():
