@@ -116,11 +116,7 @@ class IkConfig:
     """How the per-frame solve runs."""
 
     iterations: int = 2
-    """Solver iterations per frame (warm started from the previous frame) ..."""
-    min_iteration_gain_m: float = 0.0005
-    """... where an iteration that lowers the frame's mean keypoint error by less than this is its
-    last: the frame has converged (a still pose) or is held by its limits (a floor pose the
-    ranges cannot reach). The same holds for catch-up iterations."""
+    """Solver iterations per frame (warm started from the previous frame)."""
     first_frame_iterations: int = 50
     """Solver iterations of the first frame, which starts from the default pose."""
     solver: str = "daqp"

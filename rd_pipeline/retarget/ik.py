@@ -274,19 +274,12 @@ class RetargetIk:
         tasks = [*self.tasks, *extra_tasks]
         self._set_frame_targets(t)
         self.step_limit.start_frame(previous, root_max_step)
-        # Each iteration must still bring the frame closer to its targets: a frame already there (a
-        # still pose) or held by its limits (a floor pose the ranges cannot reach) stops early.
-        # Beyond `iterations`, a frame that lags its targets catches up.
-        error = self._keypoint_error(t)
-        most = self.settings.iterations + self.settings.catch_up_iterations
-        for done in range(most):
-            if done >= self.settings.iterations and error <= lag_limit:
-                break
+        for _ in range(self.settings.iterations):
             self._iterate(tasks)
-            before = error
-            error = self._keypoint_error(t)
-            if before - error < self.settings.min_iteration_gain_m:
-                break
+        extra = 0
+        while extra < self.settings.catch_up_iterations and self._keypoint_error(t) > lag_limit:
+            self._iterate(tasks)
+            extra += 1
         return self._clipped(self.configuration.q)
 
     def keypoint_errors(self, qpos: np.ndarray, first: int = 0) -> np.ndarray:
