@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import mink
 import numpy as np
@@ -211,3 +212,65 @@ def test_the_ik_avoids_every_pair_its_step_check_counts(name: str) -> None:
     _require_same_pairs(robot, marked)  # what RetargetIk checks when it is built
     plain = {tuple(sorted(pair)) for pair in mink.CollisionAvoidanceLimit(model, pairs).geom_id_pairs}
     assert (plain == checked) == (name != "h1_2")
+
+
+class _LaggingIk:
+    """What `repair_lag` reads of a RetargetIk: a real robot, and keypoint errors scripted to lag
+    in frames 40-59 of the first solve and to be lower wherever a re-solve is asked about."""
+
+    def __init__(self, robot) -> None:
+        self.robot = robot
+        self.settings = RetargetConfig().ik
+        self.targets = SimpleNamespace(fps=50.0)
+
+    def keypoint_errors(self, qpos: np.ndarray, first: int = 0) -> np.ndarray:
+        if first == 0:
+            errors = np.full(len(qpos), 0.05)
+            errors[40:60] = 0.4
+            return errors
+        return np.full(len(qpos), 0.04)
+
+
+def _pose_in_contact(robot, standing: np.ndarray) -> np.ndarray:
+    """`standing` with its joints drawn at random (fixed seed) until some configured pair interpenetrates."""
+    from rd_pipeline.retarget.quality import colliding_frames
+
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        poses = np.repeat(standing[None], 64, axis=0)
+        poses[:, robot.qpos_indices] = rng.uniform(*robot.joint_range.T, size=(64, len(robot.qpos_indices)))
+        touching = colliding_frames(robot, poses, 0.0)
+        if touching.any():
+            return poses[np.flatnonzero(touching)[0]]
+    raise AssertionError("no random pose brought a configured pair into contact")
+
+
+def test_the_lag_repair_keeps_no_resolve_that_brings_a_pair_into_contact(monkeypatch) -> None:
+    # A re-solve that lags less is kept, unless it puts a configured body pair into contact that the
+    # first solve kept apart (its fade back into the first solve blends two configurations).
+    from rd_pipeline.retarget import repair as repair_module
+    from rd_pipeline.retarget.config import LagRepair
+    from rd_pipeline.retarget.quality import colliding_frames
+
+    robot = load_robot("g1")
+    standing = np.zeros(robot.model.nq)
+    standing[2] = 0.8
+    standing[3] = 1.0
+    standing[robot.qpos_indices] = robot.config.default_pos
+    qpos = np.repeat(standing[None], 100, axis=0)
+    assert not colliding_frames(robot, qpos, 0.0).any()
+    contact = _pose_in_contact(robot, standing)
+    ik = _LaggingIk(robot)
+    for touching in (False, True):
+
+        def solve_again(ik, qpos, errors, window, lag_limit, repair, touching=touching) -> np.ndarray:
+            candidate = qpos[window.anchor + 1 : window.rejoin_end + 1].copy()
+            candidate[:, robot.qpos_indices] += 0.01  # a re-solve that differs, within the ranges
+            if touching:
+                candidate[len(candidate) // 2] = contact
+            return candidate
+
+        monkeypatch.setattr(repair_module, "_solve_window_again", solve_again)
+        out, repaired = repair_module.repair_lag(ik, qpos, LagRepair())
+        assert repaired == (0 if touching else 1)
+        assert np.array_equal(out, qpos) == touching
