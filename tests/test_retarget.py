@@ -274,3 +274,42 @@ def test_the_lag_repair_keeps_no_resolve_that_brings_a_pair_into_contact(monkeyp
         out, repaired = repair_module.repair_lag(ik, qpos, LagRepair())
         assert repaired == (0 if touching else 1)
         assert np.array_equal(out, qpos) == touching
+
+
+def test_a_catch_up_that_stops_gaining_ends_early(monkeypatch) -> None:
+    # The lag repair's re-solves pass a minimum gain: a frame whose catch-up no longer brings it
+    # closer stops there instead of running every catch-up iteration.
+    from rd_pipeline.retarget.ik import RetargetIk
+    from rd_pipeline.retarget.quality import FootMeshes
+    from rd_pipeline.retarget.targets import build_targets
+    from rd_pipeline.robots.hulls import BodyHulls
+
+    robot = load_robot("g1")
+    params = RetargetConfig()
+    human = _human("dance1_subject2", seconds=2.0)
+    feet = FootMeshes.from_robot(robot)
+    targets = build_targets(human, robot, params.fps, feet.vertices, params.contact, params.shape, params.body_contact)
+    ik = RetargetIk(robot, targets, params.weights, params.ik, BodyHulls.from_robot(robot))
+    start = ik.solve(range(40))[-1]
+    iterations = 0
+    solve_once = RetargetIk._iterate
+
+    def counted(self, tasks) -> None:
+        nonlocal iterations
+        iterations += 1
+        solve_once(self, tasks)
+
+    monkeypatch.setattr(RetargetIk, "_iterate", counted)
+    counts = {}
+    errors = {}
+    for gain in (-np.inf, params.repair.catch_up_min_gain_m):
+        iterations = 0
+        ik.configuration.update(start)
+        # A lag limit of 0 makes every frame lag: all catch-up iterations run unless stopped.
+        ik.solve_frame(40, start, ik.root_steps[40], 0.0, (), gain)
+        counts[gain] = iterations
+        errors[gain] = ik._keypoint_error(40)
+    full, stopped = counts.values()
+    assert full == params.ik.iterations + params.ik.catch_up_iterations
+    assert params.ik.iterations < stopped < full
+    assert abs(errors[params.repair.catch_up_min_gain_m] - errors[-np.inf]) < 0.002

@@ -206,6 +206,12 @@ class LagRepair:
     rejoin_s: float = 0.5
     """After the stretch, seconds over which the re-solve is guided back to and cross-faded into the
     first solution, so the splice is continuous."""
+    catch_up_min_gain_m: float = 0.0005
+    """In the re-solve, a catch-up iteration that lowers the frame's mean keypoint error by less
+    than this is the frame's last. Its frames lag by construction, and on floor work most lag
+    because the ranges cannot reach the pose: there all 8 catch-up iterations ran for a median
+    gain of 0.01 mm. The forward solve keeps every catch-up iteration: cut there, they moved a
+    getting-up take onto a worse branch."""
 
 
 @dataclass(frozen=True)

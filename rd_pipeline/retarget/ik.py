@@ -265,21 +265,28 @@ class RetargetIk:
         root_max_step: np.ndarray,
         lag_limit: float,
         extra_tasks: tuple = (),
+        catch_up_min_gain_m: float = -np.inf,
     ) -> np.ndarray:
         """Frame `t` warm started from the current configuration, within one frame's step of `previous`.
 
         A frame whose keypoint error stays above `lag_limit` (a fall, a fast turn) is solved further,
-        within the same per-frame bounds, instead of carrying the lag into the next frames.
+        within the same per-frame bounds, instead of carrying the lag into the next frames; a
+        catch-up iteration that lowers the error by less than `catch_up_min_gain_m` is its last.
         """
         tasks = [*self.tasks, *extra_tasks]
         self._set_frame_targets(t)
         self.step_limit.start_frame(previous, root_max_step)
         for _ in range(self.settings.iterations):
             self._iterate(tasks)
+        error = self._keypoint_error(t)
         extra = 0
-        while extra < self.settings.catch_up_iterations and self._keypoint_error(t) > lag_limit:
+        while extra < self.settings.catch_up_iterations and error > lag_limit:
             self._iterate(tasks)
             extra += 1
+            before = error
+            error = self._keypoint_error(t)
+            if before - error < catch_up_min_gain_m:
+                break
         return self._clipped(self.configuration.q)
 
     def keypoint_errors(self, qpos: np.ndarray, first: int = 0) -> np.ndarray:

@@ -88,7 +88,7 @@ def _solve_window_again(
     first = window.anchor
     end = window.backward_start
     last = window.rejoin_end
-    backward = _solve_backward(ik, qpos[end], range(end - 1, first, -1), lag_limit)
+    backward = _solve_backward(ik, qpos[end], range(end - 1, first, -1), lag_limit, repair.catch_up_min_gain_m)
     backward_errors = ik.keypoint_errors(backward, first + 1)
     guide = qpos[first + 1 : last + 1].copy()
     better = backward_errors < errors[first + 1 : end]
@@ -100,7 +100,14 @@ def _solve_window_again(
     ik.configuration.update(previous)
     for k, t in enumerate(range(first + 1, last + 1)):
         guide_task.set_target(guide[k])
-        resolved[k] = ik.solve_frame(t, previous, ik.root_steps[t], lag_limit, (guide_task,))
+        resolved[k] = ik.solve_frame(
+            t,
+            previous,
+            ik.root_steps[t],
+            lag_limit,
+            (guide_task,),
+            repair.catch_up_min_gain_m,
+        )
         previous = resolved[k]
     fade = np.ones(len(resolved))
     tail = last - end
@@ -109,13 +116,19 @@ def _solve_window_again(
     return blend_configurations(qpos[first + 1 : last + 1], resolved, fade)
 
 
-def _solve_backward(ik: RetargetIk, start: np.ndarray, frames: range, lag_limit: float) -> np.ndarray:
+def _solve_backward(
+    ik: RetargetIk,
+    start: np.ndarray,
+    frames: range,
+    lag_limit: float,
+    catch_up_min_gain_m: float,
+) -> np.ndarray:
     """Frames in reverse order from `start`, returned in forward order (one row per frame)."""
     out = np.empty((len(frames), len(start)))
     previous = start
     ik.configuration.update(start)
     for k, t in enumerate(frames):
         # Going back in time, frame t is reached from t + 1: that step's root budget applies.
-        out[k] = ik.solve_frame(t, previous, ik.root_steps[t + 1], lag_limit)
+        out[k] = ik.solve_frame(t, previous, ik.root_steps[t + 1], lag_limit, (), catch_up_min_gain_m)
         previous = out[k]
     return out[::-1]
