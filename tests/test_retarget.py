@@ -175,9 +175,8 @@ def test_lagging_windows_are_padded_merged_and_off_at_zero_ratio() -> None:
     assert lagging_windows(errors, 50.0, dataclasses.replace(repair, error_ratio=0.0)) == []
 
 
-def test_frames_visited_backward_get_their_own_task_costs() -> None:
-    # The lag repair solves stretches backward: each frame must hold its own costs (planted or
-    # swinging feet), not those of the frame visited before it.
+def _g1_dance_ik(seconds: float):
+    """The retarget's IK, with default params, for G1 on the first `seconds` of dance1_subject2."""
     from rd_pipeline.retarget.ik import RetargetIk
     from rd_pipeline.retarget.quality import FootMeshes
     from rd_pipeline.retarget.targets import build_targets
@@ -186,9 +185,16 @@ def test_frames_visited_backward_get_their_own_task_costs() -> None:
     robot = load_robot("g1")
     params = RetargetConfig()
     feet = FootMeshes.from_robot(robot)
-    human = _human("dance1_subject2", seconds=8.0)
+    human = _human("dance1_subject2", seconds=seconds)
     targets = build_targets(human, robot, params.fps, feet.vertices, params.contact, params.shape, params.body_contact)
-    ik = RetargetIk(robot, targets, params.weights, params.ik, BodyHulls.from_robot(robot))
+    return RetargetIk(robot, targets, params.weights, params.ik, BodyHulls.from_robot(robot))
+
+
+def test_frames_visited_backward_get_their_own_task_costs() -> None:
+    # The lag repair solves stretches backward: each frame must hold its own costs (planted or
+    # swinging feet), not those of the frame visited before it.
+    ik = _g1_dance_ik(seconds=8.0)
+    targets = ik.targets
     changes = np.flatnonzero(np.any(ik.position_costs[1:] != ik.position_costs[:-1], axis=(1, 2)))
     assert len(changes) >= 2, "the excerpt should switch feet between planted and swinging"
     q = ik.initial_configuration()
@@ -280,16 +286,9 @@ def test_a_catch_up_that_stops_gaining_ends_early(monkeypatch) -> None:
     # The lag repair's re-solves pass a minimum gain: a frame whose catch-up no longer brings it
     # closer stops there instead of running every catch-up iteration.
     from rd_pipeline.retarget.ik import RetargetIk
-    from rd_pipeline.retarget.quality import FootMeshes
-    from rd_pipeline.retarget.targets import build_targets
-    from rd_pipeline.robots.hulls import BodyHulls
 
-    robot = load_robot("g1")
     params = RetargetConfig()
-    human = _human("dance1_subject2", seconds=2.0)
-    feet = FootMeshes.from_robot(robot)
-    targets = build_targets(human, robot, params.fps, feet.vertices, params.contact, params.shape, params.body_contact)
-    ik = RetargetIk(robot, targets, params.weights, params.ik, BodyHulls.from_robot(robot))
+    ik = _g1_dance_ik(seconds=2.0)
     start = ik.solve(range(40))[-1]
     iterations = 0
     solve_once = RetargetIk._iterate
