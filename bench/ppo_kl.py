@@ -88,9 +88,10 @@ def _measure(args: argparse.Namespace, finished: Path, scale: float) -> list[dic
     store = finished.parents[3]
     with tempfile.TemporaryDirectory(dir=store.parent) as scratch:
         root = Path(scratch)
+        # The continuation only reads the stages before it: links, not copies of the whole store.
         for stage in store.iterdir():
             if stage.is_dir() and stage.name != "train":
-                shutil.copytree(stage, root / stage.name)
+                shutil.copytree(stage, root / stage.name, copy_function=os.link)
         shutil.copytree(finished, root / finished.relative_to(store), copy_function=os.link)
         os.environ["RD_ARTIFACTS"] = str(root)
         try:
