@@ -229,9 +229,9 @@ class RetargetIk:
         return q
 
     def solve(self, frames: Iterable[int]) -> np.ndarray:
-        """(T, nq) configurations, frame by frame."""
+        """(T, nq) configurations, frame by frame; rows of frames not visited are NaN."""
         targets = self.targets
-        out = np.empty((targets.n_frames, self.robot.model.nq))
+        out = np.full((targets.n_frames, self.robot.model.nq), np.nan)
         self.configuration.update(self.initial_configuration())
         previous = None
         window = max(1, round(self.settings.catch_up_window_s * targets.fps))
