@@ -313,3 +313,32 @@ def test_a_catch_up_that_stops_gaining_ends_early(monkeypatch) -> None:
     assert full == params.ik.iterations + params.ik.catch_up_iterations
     assert params.ik.iterations < stopped < full
     assert abs(errors[params.repair.catch_up_min_gain_m] - errors[-np.inf]) < 0.002
+
+
+def test_a_fast_fall_does_not_fold_a_leg_onto_its_alias() -> None:
+    # H1-2's model lets a hip pitch 2.5 rad back. Played 1.3x fast, the push and fall lagged, the
+    # IK swung the right leg back to that bound and then rolled it half a turn: the knee where the
+    # human's is, bent the wrong way, for the rest of the take. The config's retarget range keeps
+    # the hip where performers' hips go; with the model's range the same excerpt folds.
+    human = _human("pushAndFall1_subject1")
+    first = int(50 * human.fps)
+    last = int(66 * human.fps)
+    fast = dataclasses.replace(
+        human, pos_w=human.pos_w[first:last], quat_w=human.quat_w[first:last], fps=human.fps * 1.3
+    )
+    robot = load_robot("h1_2")
+    unbounded = np.tile([-np.inf, np.inf], (len(robot.config.joint_names), 1))
+    model_range = dataclasses.replace(robot, config=dataclasses.replace(robot.config, retarget_range=unbounded))
+    hip = robot.config.joint_names.index("right_hip_pitch_joint")
+    outcome = {}
+    for name, candidate in (("config", robot), ("model", model_range)):
+        result = retarget(fast, candidate, RetargetConfig())
+        reference = result.reference
+        bodies = [reference.body_names.index(b) for b in result.targets.bodies]
+        error = np.linalg.norm(reference.body_pos_w[:, bodies] - result.targets.positions, axis=2).mean(axis=1)
+        last_seconds = int(3 * result.targets.fps)
+        outcome[name] = (reference.joint_pos[:, hip].max(), error[-last_seconds:].mean())
+    assert outcome["config"][0] <= robot.retarget_range[hip, 1] + 1e-9
+    assert outcome["config"][1] < 0.10
+    assert outcome["model"][0] > 2.0
+    assert outcome["model"][1] > 0.20

@@ -108,6 +108,34 @@ def test_uncovered_joint_pattern_is_named(tmp_path: Path) -> None:
         load_robot_config("h1", path)
 
 
+def test_a_retarget_range_without_the_default_pose_is_named(tmp_path: Path) -> None:
+    path = _broken_config(tmp_path, "h1", '"*_hip_pitch_joint" = [-inf, 1.2]', '"*_hip_pitch_joint" = [0.5, 1.2]')
+    with pytest.raises(PipelineError) as error:
+        check_against_model(load_robot_config("h1", path), load_robot("h1").model)
+    assert str(error.value) == (
+        f"{path}: joints.retarget_range leaves 'left_hip_pitch_joint' [0.5, 1.2] within the model's range,"
+        " which does not hold its default_pos -0.1"
+    )
+
+
+def test_a_malformed_retarget_range_is_named(tmp_path: Path) -> None:
+    path = _broken_config(tmp_path, "h1", '"*_hip_pitch_joint" = [-inf, 1.2]', '"*_hip_pitch_joint" = [1.2, -1.0]')
+    with pytest.raises(PipelineError) as error:
+        load_robot_config("h1", path)
+    assert str(error.value) == (
+        f'{path}: joints.retarget_range."*_hip_pitch_joint" must be [lower, upper] with lower < upper, got [1.2, -1.0]'
+    )
+
+
+def test_the_retarget_range_narrows_the_model_range_where_it_says() -> None:
+    robot = load_robot("h1_2")
+    names = robot.config.joint_names
+    narrowed = robot.retarget_range != robot.joint_range
+    assert [names[j] for j in np.flatnonzero(narrowed.any(axis=1))] == ["left_hip_pitch_joint", "right_hip_pitch_joint"]
+    assert robot.joint_range[names.index("right_hip_pitch_joint")].tolist() == pytest.approx([-3.14, 2.5])
+    assert robot.retarget_range[names.index("right_hip_pitch_joint")].tolist() == pytest.approx([-3.14, 1.2])
+
+
 def test_unknown_robot() -> None:
     with pytest.raises(PipelineError, match=r"unknown robot 'g2'.*available: g1, g1_29dof, h1, h1_2"):
         load_robot_config("g2")

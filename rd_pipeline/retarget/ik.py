@@ -355,12 +355,13 @@ def _posture_task(robot: Robot, configuration: mink.Configuration, cost: float) 
 
 
 def _frame_step_limit(robot: Robot, fps: float, velocity_margin: float) -> FrameStepLimit:
-    """Joint ranges, and a step per frame within (a margin of) each joint's velocity limit."""
+    """Joint ranges (the config's retarget range), and a step per frame within (a margin of) each
+    joint's velocity limit."""
     frame_period = 1.0 / fps
     return FrameStepLimit(
         robot.dof_indices,
-        robot.joint_range[:, 0],
-        robot.joint_range[:, 1],
+        robot.retarget_range[:, 0],
+        robot.retarget_range[:, 1],
         robot.qpos_indices,
         robot.model.nv,
         robot.config.velocity_limit * frame_period * velocity_margin,

@@ -283,9 +283,9 @@ def _joint_limit_violations(robot: Robot, joint_pos: np.ndarray, thresholds: Qua
 
 
 def range_limited(robot: Robot, joint_pos: np.ndarray, thresholds: QualityThresholds) -> np.ndarray:
-    """(T, J) bool: joint j of frame t is at a bound of its range (within the margin), so the range,
-    not the human's pose, decided its angle."""
-    low, high = robot.joint_range.T
+    """(T, J) bool: joint j of frame t is at a bound of the range retargeting keeps it within (the
+    margin included), so the range, not the human's pose, decided its angle."""
+    low, high = robot.retarget_range.T
     margin = thresholds.range_limit_margin_rad
     return (joint_pos < low + margin) | (joint_pos > high - margin)
 

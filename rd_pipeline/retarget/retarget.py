@@ -107,7 +107,8 @@ def _pelvis_slack(ik: RetargetIk, smoothed: np.ndarray, refined: np.ndarray) -> 
 
 
 def _smooth_trajectory(robot: Robot, qpos: np.ndarray, sigma: float) -> np.ndarray:
-    """Gaussian smoothing of the joint and root trajectories (sequence-level), back inside the joint range.
+    """Gaussian smoothing of the joint and root trajectories (sequence-level), back inside the range
+    the IK kept (the config's retarget range).
 
     Smoothing averages neighbouring frames, so it never raises a frame-to-frame speed above the
     largest one it started from; the velocity limits the IK enforced still hold.
@@ -115,7 +116,7 @@ def _smooth_trajectory(robot: Robot, qpos: np.ndarray, sigma: float) -> np.ndarr
     smoothed = gaussian_filter1d(qpos, sigma, axis=0, mode="nearest")
     quat = smoothed[:, 3:7]
     smoothed[:, 3:7] = quat / np.linalg.norm(quat, axis=1, keepdims=True)
-    lower, upper = robot.joint_range.T
+    lower, upper = robot.retarget_range.T
     smoothed[:, robot.qpos_indices] = np.clip(smoothed[:, robot.qpos_indices], lower, upper)
     return smoothed
 

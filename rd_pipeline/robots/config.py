@@ -49,6 +49,10 @@ class RobotConfig:
     """Velocity limit per joint (rad/s)."""
     default_pos: np.ndarray
     """Default standing pose per joint (rad)."""
+    retarget_range: np.ndarray
+    """(J, 2) bounds per joint (rad) that retargeting keeps within, intersected with the model's
+    range; (-inf, inf) where the TOML's `joints.retarget_range` names none. For a model range wider
+    than any performer's joint, where the IK could fold a limb onto an alias of its pose."""
     root_body: str
     """The floating-base body."""
     foot_bodies: tuple[str, str]
@@ -119,6 +123,7 @@ def load_robot_config(name: str, path: Path | None = None) -> RobotConfig:
         effort_limit=reader.per_joint("joints.effort_limit", joints),
         velocity_limit=reader.per_joint("joints.velocity_limit", joints),
         default_pos=reader.per_joint("joints.default_pos", joints),
+        retarget_range=reader.joint_bounds("joints.retarget_range", joints),
         root_body=reader.get("bodies.root", str),
         foot_bodies=(feet[0], feet[1]),
         tracking_bodies=tuple(reader.get("bodies.tracking", list)),
@@ -174,3 +179,29 @@ class _Fields:
             values[i] = float(value)
         values.setflags(write=False)
         return values
+
+    def joint_bounds(self, dotted: str, joints: tuple[str, ...]) -> np.ndarray:
+        """(J, 2) [lower, upper] per joint from an optional pattern table; unbounded where none matches."""
+        patterns: dict = self.get(dotted, dict) if self.has(dotted) else {}
+        bounds = np.tile([-np.inf, np.inf], (len(joints), 1))
+        for i, joint in enumerate(joints):
+            match = next((p for p in patterns if fnmatch.fnmatchcase(joint, p)), None)
+            if match is None:
+                continue
+            value = patterns[match]
+            numbers = isinstance(value, list) and all(isinstance(v, (int, float)) for v in value)
+            if not numbers or len(value) != 2 or not value[0] < value[1]:
+                raise PipelineError(
+                    f'{self.path}: {dotted}."{match}" must be [lower, upper] with lower < upper, got {value!r}'
+                )
+            bounds[i] = value
+        bounds.setflags(write=False)
+        return bounds
+
+    def has(self, dotted: str) -> bool:
+        node = self.raw
+        for part in dotted.split("."):
+            if not isinstance(node, dict) or part not in node:
+                return False
+            node = node[part]
+        return True

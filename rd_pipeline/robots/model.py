@@ -40,6 +40,15 @@ class Robot:
         joint_ids = [self.model.joint(name).id for name in self.config.joint_names]
         return self.model.jnt_range[joint_ids].copy()
 
+    @property
+    def retarget_range(self) -> np.ndarray:
+        """(J, 2) the bounds retargeting keeps each joint within: the model's range, narrowed where
+        the config's `retarget_range` says."""
+        model_range = self.joint_range
+        lower = np.maximum(model_range[:, 0], self.config.retarget_range[:, 0])
+        upper = np.minimum(model_range[:, 1], self.config.retarget_range[:, 1])
+        return np.stack([lower, upper], axis=1)
+
 
 def load_robot(name: str) -> Robot:
     """Load and validate a robot; every mismatch between config and model is one clear error."""
@@ -93,6 +102,19 @@ def check_against_model(config: RobotConfig, model: mujoco.MjModel) -> None:
                 raise PipelineError(
                     f"{where}: {field} names body '{body}', which is not in the model{_did_you_mean(body, bodies)}"
                 )
+    _check_retarget_range(config, model)
+
+
+def _check_retarget_range(config: RobotConfig, model: mujoco.MjModel) -> None:
+    """The range retargeting may use keeps the default pose: the solve starts from it."""
+    for joint, bounds, default in zip(config.joint_names, config.retarget_range, config.default_pos):
+        lower = max(bounds[0], model.joint(joint).range[0])
+        upper = min(bounds[1], model.joint(joint).range[1])
+        if not lower <= default <= upper:
+            raise PipelineError(
+                f"{config.source}: joints.retarget_range leaves '{joint}' [{lower:g}, {upper:g}] within the model's"
+                f" range, which does not hold its default_pos {default:g}"
+            )
 
 
 def _did_you_mean(name: str, options: list[str]) -> str:
