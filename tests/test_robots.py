@@ -109,21 +109,21 @@ def test_uncovered_joint_pattern_is_named(tmp_path: Path) -> None:
 
 
 def test_a_retarget_range_without_the_default_pose_is_named(tmp_path: Path) -> None:
-    path = _broken_config(tmp_path, "h1", '"*_hip_pitch_joint" = [-inf, 1.2]', '"*_hip_pitch_joint" = [0.5, 1.2]')
+    path = _broken_config(tmp_path, "h1", '"*_hip_pitch_joint" = [-inf, 1.5]', '"*_hip_pitch_joint" = [0.5, 1.5]')
     with pytest.raises(PipelineError) as error:
         check_against_model(load_robot_config("h1", path), load_robot("h1").model)
     assert str(error.value) == (
-        f"{path}: joints.retarget_range leaves 'left_hip_pitch_joint' [0.5, 1.2] within the model's range,"
+        f"{path}: joints.retarget_range leaves 'left_hip_pitch_joint' [0.5, 1.5] within the model's range,"
         " which does not hold its default_pos -0.1"
     )
 
 
 def test_a_malformed_retarget_range_is_named(tmp_path: Path) -> None:
-    path = _broken_config(tmp_path, "h1", '"*_hip_pitch_joint" = [-inf, 1.2]', '"*_hip_pitch_joint" = [1.2, -1.0]')
+    path = _broken_config(tmp_path, "h1", '"*_hip_pitch_joint" = [-inf, 1.5]', '"*_hip_pitch_joint" = [1.5, -1.0]')
     with pytest.raises(PipelineError) as error:
         load_robot_config("h1", path)
     assert str(error.value) == (
-        f'{path}: joints.retarget_range."*_hip_pitch_joint" must be [lower, upper] with lower < upper, got [1.2, -1.0]'
+        f'{path}: joints.retarget_range."*_hip_pitch_joint" must be [lower, upper] with lower < upper, got [1.5, -1.0]'
     )
 
 
@@ -131,9 +131,12 @@ def test_the_retarget_range_narrows_the_model_range_where_it_says() -> None:
     robot = load_robot("h1_2")
     names = robot.config.joint_names
     narrowed = robot.retarget_range != robot.joint_range
-    assert [names[j] for j in np.flatnonzero(narrowed.any(axis=1))] == ["left_hip_pitch_joint", "right_hip_pitch_joint"]
-    assert robot.joint_range[names.index("right_hip_pitch_joint")].tolist() == pytest.approx([-3.14, 2.5])
-    assert robot.retarget_range[names.index("right_hip_pitch_joint")].tolist() == pytest.approx([-3.14, 1.2])
+    hips = ["left_hip_pitch_joint", "left_hip_roll_joint", "right_hip_pitch_joint", "right_hip_roll_joint"]
+    assert [names[j] for j in np.flatnonzero(narrowed.any(axis=1))] == hips
+    pitch = names.index("right_hip_pitch_joint")
+    roll = names.index("right_hip_roll_joint")
+    np.testing.assert_allclose(robot.joint_range[[pitch, roll]], [[-3.14, 2.5], [-3.14, 0.43]], atol=0.005)
+    np.testing.assert_allclose(robot.retarget_range[[pitch, roll]], [[-3.14, 1.5], [-1.57, 0.43]], atol=0.005)
 
 
 def test_unknown_robot() -> None:
