@@ -157,11 +157,9 @@ class _Fields:
         self.raw, self.path = raw, path
 
     def get(self, dotted: str, kind: type | tuple[type, ...]):
-        node = self.raw
-        for part in dotted.split("."):
-            if not isinstance(node, dict) or part not in node:
-                raise PipelineError(f"{self.path}: missing field '{dotted}'")
-            node = node[part]
+        node = self._find(dotted)
+        if node is None:
+            raise PipelineError(f"{self.path}: missing field '{dotted}'")
         if not isinstance(node, kind):
             raise PipelineError(f"{self.path}: field '{dotted}' has the wrong type ({type(node).__name__})")
         return node
@@ -182,7 +180,7 @@ class _Fields:
 
     def joint_bounds(self, dotted: str, joints: tuple[str, ...]) -> np.ndarray:
         """(J, 2) [lower, upper] per joint from an optional pattern table; unbounded where none matches."""
-        patterns: dict = self.get(dotted, dict) if self.has(dotted) else {}
+        patterns: dict = self.get(dotted, dict) if self._find(dotted) is not None else {}
         bounds = np.tile([-np.inf, np.inf], (len(joints), 1))
         for i, joint in enumerate(joints):
             match = next((p for p in patterns if fnmatch.fnmatchcase(joint, p)), None)
@@ -198,10 +196,11 @@ class _Fields:
         bounds.setflags(write=False)
         return bounds
 
-    def has(self, dotted: str) -> bool:
+    def _find(self, dotted: str):
+        """The value at a dotted key, or None where the TOML has none (TOML has no null)."""
         node = self.raw
         for part in dotted.split("."):
             if not isinstance(node, dict) or part not in node:
-                return False
+                return None
             node = node[part]
-        return True
+        return node
