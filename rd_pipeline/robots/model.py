@@ -44,10 +44,12 @@ class Robot:
     def retarget_range(self) -> np.ndarray:
         """(J, 2) the bounds retargeting keeps each joint within: the model's range, narrowed where
         the config's `retarget_range` says."""
-        model_range = self.joint_range
-        lower = np.maximum(model_range[:, 0], self.config.retarget_range[:, 0])
-        upper = np.minimum(model_range[:, 1], self.config.retarget_range[:, 1])
-        return np.stack([lower, upper], axis=1)
+        return _intersect(self.joint_range, self.config.retarget_range)
+
+
+def _intersect(ranges: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """(J, 2) each row of `ranges` narrowed by the same row of `bounds`."""
+    return np.stack([np.maximum(ranges[:, 0], bounds[:, 0]), np.minimum(ranges[:, 1], bounds[:, 1])], axis=1)
 
 
 def load_robot(name: str) -> Robot:
@@ -107,9 +109,9 @@ def check_against_model(config: RobotConfig, model: mujoco.MjModel) -> None:
 
 def _check_retarget_range(config: RobotConfig, model: mujoco.MjModel) -> None:
     """The range retargeting may use keeps the default pose: the solve starts from it."""
-    for joint, bounds, default in zip(config.joint_names, config.retarget_range, config.default_pos):
-        lower = max(bounds[0], model.joint(joint).range[0])
-        upper = min(bounds[1], model.joint(joint).range[1])
+    model_ranges = np.array([model.joint(joint).range for joint in config.joint_names])
+    usable = _intersect(model_ranges, config.retarget_range)
+    for joint, (lower, upper), default in zip(config.joint_names, usable, config.default_pos):
         if not lower <= default <= upper:
             raise PipelineError(
                 f"{config.source}: joints.retarget_range leaves '{joint}' [{lower:g}, {upper:g}] within the model's"
