@@ -24,7 +24,7 @@ from pathlib import Path
 from retarget import shared_takes
 
 ONE_TAKE = """
-import dataclasses, sys, time
+import sys, time
 from rd_pipeline import paths
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
