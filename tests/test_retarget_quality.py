@@ -15,7 +15,7 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.retarget.floor import FloorLimit
+from rd_pipeline.retarget.floor import FloorLimit, SupportCandidates
 from rd_pipeline.retarget.quality import FootMeshes, QualityThresholds, quality_series, retarget_quality
 from rd_pipeline.robots import Robot, load_robot
 from rd_pipeline.robots.config import available_robots
@@ -275,6 +275,32 @@ def test_floor_limit_scans_every_body_that_can_reach_the_floor(name: str) -> Non
         assert np.all(full[~scanned] >= within)
         skipped += int((~scanned).sum())
     assert skipped > 0
+
+
+def test_support_candidates_find_the_full_scans_lowest_point_while_the_body_turns(g1) -> None:
+    """G1's pelvis hull (thousands of points) turned in small random steps, 400 times: the cached
+    candidates give the full scan's index and height every time, search a small part of the hull
+    between scans, and scan again only after the turn passes `reuse`."""
+    hulls = BodyHulls.from_robot(g1)
+    k = hulls.body_names.index(g1.config.root_body)
+    points = hulls.points[k]
+    radii = hulls.radii[k]
+    reuse = 0.05
+    candidates = SupportCandidates(points, radii, reuse)
+    rng = np.random.default_rng(3)
+    up = np.array([0.0, 0.0, 1.0])
+    searched = []
+    for _ in range(400):
+        up = up + rng.normal(scale=0.01, size=3)
+        up /= np.linalg.norm(up)
+        index, z = candidates.lowest(0.7, up)
+        full = 0.7 + points @ up - radii
+        assert index == int(np.argmin(full))
+        assert z == full.min()
+        assert np.linalg.norm(up - candidates.scanned_along) <= reuse
+        searched.append(len(candidates.subset))
+    assert len(points) > 1000
+    assert np.median(searched) < 0.1 * len(points)
 
 
 def test_knees_through_the_floor_are_seen_with_feet_clear(g1) -> None:

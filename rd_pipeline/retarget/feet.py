@@ -93,7 +93,7 @@ def plant_foot(
     rotation = flat.as_matrix()
     # The lowest point of the (possibly pitched) foot clears the floor by `lift`: a pointed toe
     # near the floor would otherwise drag along it.
-    depth = -np.einsum("tij,vj->tvi", rotation, sole_vertices)[..., 2].min(axis=1)
+    depth = -np.einsum("tj,vj->tv", rotation[:, 2], sole_vertices).min(axis=1)
     position[:, 2] = np.maximum(position[:, 2], lift + depth)
     return position, rotation, lift, contact
 
