@@ -204,6 +204,31 @@ def test_frames_visited_backward_get_their_own_task_costs() -> None:
         np.testing.assert_array_equal(held, ik.position_costs[t])
 
 
+def test_the_ik_step_is_mink_solve_ik_s_though_it_drops_the_rows_out_of_reach() -> None:
+    """The QP leaves out mink's collision rows with an infinite bound (pairs out of reach) and
+    mink's range check: on 4 s of G1 dance, each frame's first step (from the previous frame's
+    pose) is mink.solve_ik's, bit for bit, where rows were dropped and the planted feet's floor
+    rows hold the step (leaving those out changes every component)."""
+    ik = _g1_dance_ik(seconds=4.0)
+    qpos = ik.solve(range(ik.targets.n_frames))
+    dropped = 0
+    holding = 0
+    for t in range(1, ik.targets.n_frames, 5):
+        ik._set_frame_targets(t)
+        ik.step_limit.start_frame(qpos[t - 1], ik.root_steps[t])
+        ik.configuration.update(qpos[t - 1])
+        ours = ik._solve_qp(ik.tasks)
+        theirs = mink.solve_ik(
+            ik.configuration, ik.tasks, 1.0, ik.settings.solver, damping=ik.damping, limits=ik.limits
+        )
+        np.testing.assert_array_equal(ours, theirs)
+        built = mink.build_ik(ik.configuration, ik.tasks, 1.0, damping=ik.damping, limits=ik.limits)
+        dropped += int(np.isinf(built.h).sum())
+        holding += int(np.sum(np.isclose(built.G @ theirs, built.h, rtol=0.0, atol=1e-9)))
+    assert dropped > 0
+    assert holding > 0
+
+
 @pytest.mark.parametrize("name", available_robots())
 def test_the_ik_avoids_every_pair_its_step_check_counts(name: str) -> None:
     """mink drops pairs whose geoms fail MuJoCo's contype/conaffinity test; H1-2's wrists are visual

@@ -162,8 +162,9 @@ class IkConfig:
     floor_support_reuse: float = 0.05
     """How far a body's up axis (a unit vector, in its own frame) may turn before the floor limit
     scans all its support points again; meanwhile it searches only those that can still be lowest
-    (`SupportCandidates`). Speed only: the lowest point found is the same. On G1 floor work a full
-    scan of the pelvis' and torso's thousands of hull points took a fifth of each QP step."""
+    (`SupportCandidates`). Speed only: the lowest point found is the same. On G1 floor work the
+    floor limit took a fifth of each QP step, most of it scanning the pelvis' and torso's thousands
+    of hull points."""
     trajectory_smoothing_s: float = 0.04
     """Gaussian sigma (s) of the sequence-level smoothing of the solved trajectory (0: none)."""
     smoothed_pair_fraction: float = 0.5
