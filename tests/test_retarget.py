@@ -17,8 +17,8 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.contact import contact_runs
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
+from rd_pipeline.retarget.collision import colliding_copy, pair_geoms, require_same_pairs
 from rd_pipeline.retarget.config import RetargetConfig
-from rd_pipeline.retarget.ik import _colliding_copy, _require_same_pairs, pair_geoms
 from rd_pipeline.retarget.quality import retarget_quality
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.robots import available_robots, load_robot
@@ -238,9 +238,9 @@ def test_the_ik_avoids_every_pair_its_step_check_counts(name: str) -> None:
     model = robot.model
     pairs = pair_geoms(robot)
     checked = {tuple(sorted(pair)) for pair in collision_geom_pairs(robot).tolist()}
-    marked = mink.CollisionAvoidanceLimit(_colliding_copy(model, pairs), pairs)
+    marked = mink.CollisionAvoidanceLimit(colliding_copy(model, pairs), pairs)
     assert {tuple(sorted(pair)) for pair in marked.geom_id_pairs} == checked
-    _require_same_pairs(robot, marked)  # what RetargetIk checks when it is built
+    require_same_pairs(robot, marked)  # what RetargetIk checks when it is built
     plain = {tuple(sorted(pair)) for pair in mink.CollisionAvoidanceLimit(model, pairs).geom_id_pairs}
     assert (plain == checked) == (name != "h1_2")
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import copy
 from collections import deque
 from collections.abc import Iterable
 
@@ -13,16 +12,15 @@ import qpsolvers
 from scipy.ndimage import maximum_filter1d
 from scipy.spatial.transform import Rotation
 
-from rd_pipeline.errors import PipelineError
+from rd_pipeline.retarget.collision import collision_limit
 from rd_pipeline.retarget.config import IkConfig, IkWeights
 from rd_pipeline.retarget.floor import FloorLimit
 from rd_pipeline.retarget.limits import FrameStepLimit
-from rd_pipeline.retarget.smoothing import smoothstep
 from rd_pipeline.retarget.targets import RetargetTargets
+from rd_pipeline.retarget.tasks import frame_tasks, position_cost_schedule, posture_task, target_poses
 from rd_pipeline.robots import Robot
-from rd_pipeline.robots.config import RobotConfig
 from rd_pipeline.robots.hulls import BodyHulls
-from rd_pipeline.robots.model import collision_geom_pairs, collision_geoms
+from rd_pipeline.robots.model import collision_geom_pairs
 
 
 class RetargetIk:
@@ -42,10 +40,10 @@ class RetargetIk:
         model = robot.model
         config = robot.config
         self.configuration = mink.Configuration(model)
-        self.frame_tasks = _frame_tasks(targets, config, weights, settings.lm_damping)
-        self.position_costs = _position_cost_schedule(targets, config, weights)
+        self.frame_tasks = frame_tasks(targets, config, weights, settings.lm_damping)
+        self.position_costs = position_cost_schedule(targets, config, weights)
         self.applied_costs: np.ndarray | None = None
-        self.posture = _posture_task(robot, self.configuration, weights.posture)
+        self.posture = posture_task(robot, self.configuration, weights.posture)
         self.step_limit = _frame_step_limit(robot, targets.fps, settings.velocity_margin)
         self.root_steps = _root_step_budget(targets, config.root_body, settings)
         self.floor = FloorLimit(
@@ -59,11 +57,14 @@ class RetargetIk:
         self.collision_pairs = collision_geom_pairs(robot)
         self.pair_reach = model.geom_rbound[self.collision_pairs].sum(axis=1)
         self.depth_known_at: tuple[np.ndarray, float] | None = None
-        self.limits = _limits(robot, self.step_limit, self.floor, settings)
+        avoidance = collision_limit(robot, settings)
+        self.limits: list[mink.Limit] = [self.step_limit, self.floor]
+        if avoidance is not None:
+            self.limits.append(avoidance)
         self.tasks = [*self.frame_tasks, self.posture]
         self.damping = weights.damping
         self.key_body_ids = np.array([robot.body_ids[b] for b in targets.bodies])
-        self.target_poses = _target_poses(targets)
+        self.target_poses = target_poses(targets)
 
     def initial_configuration(self) -> np.ndarray:
         """Default pose placed at the first frame's pelvis target."""
@@ -309,62 +310,6 @@ class RetargetIk:
         return errors
 
 
-def _frame_tasks(
-    targets: RetargetTargets,
-    config: RobotConfig,
-    weights: IkWeights,
-    lm_damping: float,
-) -> list[mink.FrameTask]:
-    """One frame task per key body, in `targets.bodies` order; bodies without an orientation
-    target get no orientation cost."""
-    oriented = set(targets.orientations)
-    feet = set(config.foot_bodies)
-    tasks: list[mink.FrameTask] = []
-    for body in targets.bodies:
-        if body == config.root_body:
-            orientation_cost = weights.root_orientation
-        elif body in feet:
-            orientation_cost = weights.feet_orientation
-        elif body in oriented:
-            orientation_cost = weights.torso_orientation
-        else:
-            orientation_cost = 0.0
-        tasks.append(
-            mink.FrameTask(
-                body,
-                "body",
-                position_cost=1.0,
-                orientation_cost=orientation_cost,
-                lm_damping=lm_damping,
-            )
-        )
-    return tasks
-
-
-def _target_poses(targets: RetargetTargets) -> np.ndarray:
-    """(T, K, 7) wxyz_xyz target poses of the key bodies; bodies without an orientation target get
-    the identity, which their tasks do not weigh."""
-    poses = np.zeros((targets.n_frames, len(targets.bodies), 7))
-    poses[..., 0] = 1.0
-    poses[..., 4:] = targets.positions
-    for k, body in enumerate(targets.bodies):
-        rotation = targets.orientations.get(body)
-        if rotation is None:
-            continue
-        for t in range(targets.n_frames):
-            mujoco.mju_mat2Quat(poses[t, k, :4], rotation[t].reshape(-1))
-    return poses
-
-
-def _posture_task(robot: Robot, configuration: mink.Configuration, cost: float) -> mink.PostureTask:
-    """Pulls every joint toward the robot's default pose."""
-    posture = mink.PostureTask(robot.model, cost=cost)
-    q_default = configuration.q.copy()
-    q_default[robot.qpos_indices] = robot.config.default_pos
-    posture.set_target(q_default)
-    return posture
-
-
 def _frame_step_limit(robot: Robot, fps: float, velocity_margin: float) -> FrameStepLimit:
     """Joint ranges (the config's retarget range), and a step per frame within (a margin of) each
     joint's velocity limit."""
@@ -396,59 +341,6 @@ def _swing_floor_raise(
     return raise_m
 
 
-def _limits(robot: Robot, step_limit: FrameStepLimit, floor: FloorLimit, settings: IkConfig) -> list[mink.Limit]:
-    """The frame step and the floor, and collision avoidance between the config's body pairs."""
-    model = robot.model
-    pairs = pair_geoms(robot)
-    limits: list[mink.Limit] = [step_limit, floor]
-    if pairs:
-        avoidance = mink.CollisionAvoidanceLimit(
-            _colliding_copy(model, pairs),
-            pairs,
-            minimum_distance_from_collisions=settings.collision_margin_m,
-            collision_detection_distance=settings.collision_detection_m,
-        )
-        _require_same_pairs(robot, avoidance)
-        limits.append(avoidance)
-    return limits
-
-
-def pair_geoms(robot: Robot) -> list[tuple[list[int], list[int]]]:
-    """The geoms of each body pair of the config, as mink's collision limit takes them."""
-    model = robot.model
-    return [
-        (collision_geoms(model, robot.body_ids[a]), collision_geoms(model, robot.body_ids[b]))
-        for a, b in robot.config.collision_pairs
-    ]
-
-
-def _require_same_pairs(robot: Robot, avoidance: mink.CollisionAvoidanceLimit) -> None:
-    """The QP must avoid every geom pair the step check counts; mink also skips bodies welded
-    together or parent and child, which a robot config should not pair."""
-    checked = {tuple(sorted(pair)) for pair in collision_geom_pairs(robot).tolist()}
-    avoided = {tuple(sorted(pair)) for pair in avoidance.geom_id_pairs}
-    if checked != avoided:
-        first, second = sorted(checked - avoided)[0]
-        model = robot.model
-        bodies = (model.body(model.geom_bodyid[first]).name, model.body(model.geom_bodyid[second]).name)
-        raise PipelineError(
-            f"{robot.config.source}: collision pair {bodies} cannot be kept apart by the IK "
-            "(welded, or parent and child); remove it from [collision] pairs"
-        )
-
-
-def _colliding_copy(model: mujoco.MjModel, pairs: list[tuple[list[int], list[int]]]) -> mujoco.MjModel:
-    """`model` with every geom of the configured pairs marked as colliding, for the QP's collision
-    limit. mink drops pairs that fail MuJoCo's contype/conaffinity test, and some hands are visual
-    geoms only (H1-2's wrists) that the step check (`_pair_depth`) counts all the same: the QP then
-    steers a wrist into the torso and the step check refuses every step after, freezing the pose."""
-    marked = copy.deepcopy(model)
-    for geom in {g for first, second in pairs for g in (*first, *second)}:
-        marked.geom_contype[geom] |= 1
-        marked.geom_conaffinity[geom] |= 1
-    return marked
-
-
 def _root_step_budget(targets: RetargetTargets, root_body: str, settings: IkConfig) -> np.ndarray:
     """(T, 6) how far the floating base may move in each frame, per tangent axis (world linear,
     body angular): a multiple of its own target's fastest motion nearby plus a minimum, so the root
@@ -468,32 +360,3 @@ def _root_step_budget(targets: RetargetTargets, root_body: str, settings: IkConf
     angular = maximum_filter1d(np.concatenate([angular[:1], angular]), window, axis=0)
     steps[:, 3:] = settings.root_angular_speed_ratio * angular + settings.root_angular_speed_floor_rad_s * period
     return steps
-
-
-def _position_cost_schedule(targets: RetargetTargets, config: RobotConfig, weights: IkWeights) -> np.ndarray:
-    """(T, K, 3) position cost of each key body per frame, along its own axes.
-
-    Planted feet must not slide; swinging feet only guide the leg sideways, so the body follows the
-    pelvis rather than a foot it cannot reach. Bodies resting on the floor are held like planted feet.
-    Along the pelvis' own up axis the cost is higher: sinking is the cheapest way out of a conflict
-    between the feet and the legs, and it reads as a collapse.
-    """
-    n_frames = targets.n_frames
-    costs = np.full((n_frames, len(targets.bodies), 3), weights.limb_position)
-    costs[targets.body_contact] = weights.contact_position
-    root = targets.bodies.index(config.root_body)
-    costs[:, root] = [weights.root_position, weights.root_position, weights.root_height]
-    resting = targets.body_contact[:, root]
-    costs[resting, root] = np.maximum(costs[resting, root], weights.contact_position)
-    for side, foot in enumerate(config.foot_bodies):
-        k = targets.bodies.index(foot)
-        # A swinging foot's target first rises to its clearance, then travels. Until it has risen
-        # the foot is held along the floor like a planted one: any slide there reads as skate.
-        risen = targets.foot_lift[:, side] / targets.swing_clearance_m
-        lifted = smoothstep(1.0 - (1.0 - risen) / weights.swing_cost_ramp)
-        swing = weights.feet_position + lifted * (weights.swing_feet_position - weights.feet_position)
-        costs[:, k, :2] = np.where(targets.foot_contact[:, side], weights.feet_position, swing)[:, None]
-        # Along its own up axis a swinging foot keeps the planted cost: it clears the floor as its
-        # target does instead of dragging along it.
-        costs[:, k, 2] = weights.feet_position
-    return costs
