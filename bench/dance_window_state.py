@@ -1,0 +1,105 @@
+"""Keep a CPU dance-window training beyond the machine it runs on: its newest checkpoint and its
+log, in the repository, and back into a store.
+
+    python bench/dance_window_state.py save    --clip 11:21 --iterations 6000  [--robot g1 --motion dance1_subject2]
+    python bench/dance_window_state.py restore --clip 11:21 --iterations 12000 [--robot g1 --motion dance1_subject2]
+
+The artifact store is local, and a machine can be replaced between sittings (the first 86 M-sample
+run was lost that way). `save` copies the newest checkpoint of the run (finished, or interrupted in
+its work folder) and its training log, gzipped, into `--state` (default
+`bench/results/dance_window_state/`), replacing what was there. `restore` puts them into the work
+folder of the run asked for: `bench/dance_window.py` with the same arguments then continues from
+that checkpoint, as from an interrupted run (nothing in training depends on the total iterations;
+the upstream stages rebuild to the same keys). Run both with the code that trained the run first on
+`PYTHONPATH`: the keys are that code's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import shutil
+import sys
+from pathlib import Path
+
+from rd_pipeline.api import workspace
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.rl.training_log import CHECKPOINT_DIR, LOG_FILE, checkpoints_by_iteration
+
+STATE_FILE = "state.json"
+"""What the saved checkpoint belongs to (robot, motion, clip, train key, iteration)."""
+
+
+def main() -> None:
+    args = _parser().parse_args()
+    try:
+        plan = workspace.plan(
+            args.robot,
+            args.motion,
+            args.profile,
+            overrides=(f"train.clip={args.clip}", f"train.iterations={args.iterations}", *args.set),
+            seed=args.seed,
+        )
+        key = plan.stage("train").key
+        work = plan.store.work_folder("train", plan.robot, plan.motion, key)
+        if args.action == "save":
+            _save(plan, key, work, args)
+        else:
+            _restore(work, args.state)
+    except (PipelineError, ValueError, OSError) as exc:
+        sys.exit(f"error: {exc}")
+
+
+def _save(plan: workspace.Plan, key: str, work: Path, args: argparse.Namespace) -> None:
+    finished = plan.store.find("train", plan.robot, plan.motion, key)
+    folder = finished.path if finished is not None else work
+    checkpoints = checkpoints_by_iteration(folder)
+    if not checkpoints:
+        raise ValueError(f"no checkpoint of train {key} in {folder}")
+    iteration, newest = list(checkpoints.items())[-1]
+    if args.state.exists():
+        shutil.rmtree(args.state)
+    args.state.mkdir(parents=True)
+    shutil.copy2(newest, args.state / newest.name)
+    with (folder / LOG_FILE).open("rb") as log, gzip.open(args.state / f"{LOG_FILE}.gz", "wb") as packed:
+        shutil.copyfileobj(log, packed)
+    state = {
+        "robot": plan.robot,
+        "motion": plan.motion,
+        "clip": args.clip,
+        "train_key": key,
+        "iteration": iteration,
+        "checkpoint": newest.name,
+    }
+    (args.state / STATE_FILE).write_text(json.dumps(state, indent=2) + "\n")
+    print(f"saved {newest.name} of train {key} to {args.state}")
+
+
+def _restore(work: Path, state_dir: Path) -> None:
+    state = json.loads((state_dir / STATE_FILE).read_text())
+    if checkpoints_by_iteration(work):
+        raise ValueError(f"{work} already holds checkpoints: continue it as it is")
+    (work / CHECKPOINT_DIR).mkdir(parents=True, exist_ok=True)
+    shutil.copy2(state_dir / state["checkpoint"], work / CHECKPOINT_DIR / state["checkpoint"])
+    with gzip.open(state_dir / f"{LOG_FILE}.gz", "rb") as packed, (work / LOG_FILE).open("wb") as log:
+        shutil.copyfileobj(packed, log)
+    print(f"restored {state['checkpoint']} (train {state['train_key']}) into {work}")
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("action", choices=("save", "restore"))
+    parser.add_argument("--robot", default="g1")
+    parser.add_argument("--motion", default="dance1_subject2")
+    parser.add_argument("--clip", default="11:21")
+    parser.add_argument("--profile", default="cpu")
+    parser.add_argument("--iterations", type=int, required=True)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--set", nargs="*", default=[], help="further overrides, as the run had them")
+    parser.add_argument("--state", type=Path, default=Path("bench/results/dance_window_state"))
+    return parser
+
+
+if __name__ == "__main__":
+    main()
