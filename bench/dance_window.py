@@ -62,6 +62,7 @@ OPTIONS = {
 def main() -> None:
     args = _parser().parse_args()
     try:
+        gone = _gone_runs(args.gone_run)
         clip = args.clip or _busiest_clip(args)
         plan = _plan(args, clip, args.iterations)
         if args.fill_minutes:
@@ -71,7 +72,7 @@ def main() -> None:
         sys.exit(f"error: {exc}")
     if args.until == "train":
         return
-    result = _result(plan, clip, args.commit or head_commit())
+    result = _result(plan, clip, args.commit or head_commit(), gone)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     _plot(result, args.out.with_name(f"{args.out.stem}_curve.png"))
@@ -94,6 +95,13 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--probe-iterations", type=int, default=5)
     parser.add_argument("--out", type=Path, default=Path("bench/results/dance_window.json"))
     parser.add_argument("--commit", default=None, help="the commit the code ran (default: git's HEAD here)")
+    parser.add_argument(
+        "--gone-run",
+        nargs="*",
+        default=[],
+        metavar="KEY=SECONDS",
+        help="a run the training continued that is not in the store (a lease's probe) and its printed seconds",
+    )
     return parser
 
 
@@ -126,8 +134,20 @@ def _fill(args: argparse.Namespace, clip: str) -> workspace.Plan:
     return _plan(args, clip, iterations)
 
 
-def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
+def _gone_runs(pairs: list[str]) -> dict[str, float]:
+    gone = {}
+    for pair in pairs:
+        key, _, seconds = pair.partition("=")
+        try:
+            gone[key] = float(seconds)
+        except ValueError:
+            raise ValueError(f"--gone-run {pair!r}: expected KEY=SECONDS") from None
+    return gone
+
+
+def _result(plan: workspace.Plan, clip: str, commit: str, gone: dict[str, float]) -> dict[str, Any]:
     train = _artifact(plan, "train")
+    runs = training_runs(train, gone)
     export = _artifact(plan, "export")
     validate = _artifact(plan, "validate")
     manifest = json.loads((train / MANIFEST).read_text())
@@ -146,7 +166,7 @@ def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
         "motion": plan.motion,
         "clip": clip,
         "samples": samples,
-        "wall_h": round(sum(seconds for _, seconds in training_runs(train)) / 3600, 3),
+        "wall_h": round(sum(seconds for _, seconds in runs) / 3600, 3),
         "samples_per_s_median": manifest["metrics"]["samples_per_s_median"],
         "commit": commit,
         "start_zero_s": validation.start_zero_survival_s,
@@ -169,7 +189,7 @@ def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
         "E_g_mpbpe": validation.E_g_mpbpe,
         "options": {name: _lookup(params, path) for name, path in OPTIONS.items()},
         "profile": plan.profile,
-        "wall_h_per_run": {key: round(seconds / 3600, 3) for key, seconds in training_runs(train)},
+        "wall_h_per_run": {key: round(seconds / 3600, 3) for key, seconds in runs},
         "train_key": manifest["key"],
         "export_key": details["policy_key"],
         "fixed_grid_start_s": per_start["policy"]["start_s"],

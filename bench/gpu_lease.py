@@ -3,9 +3,10 @@
     python bench/gpu_lease.py pack <train artifact folder> <archive.tar.xz>   # on the GPU machine
     python bench/gpu_lease.py unpack <archive.tar.xz> [--store DIR]          # here, then export/validate
 
-`pack` drops every checkpoint's per-rank state (the environments, sampler and generators: ~30 MB
-with 8192 environments) and keeps what `export` reads, the actor's weights; the newest checkpoint
-keeps the whole algorithm (critic and optimizer too). The manifest is rewritten with the slimmed
+`pack` archives the train artifact with the shorter runs it continued (a lease's probe). It drops
+every checkpoint's per-rank state (the environments, sampler and generators: ~30 MB with 8192
+environments) and keeps what `export` reads, the actor's weights; the newest checkpoint keeps the
+whole algorithm (critic and optimizer too). The manifest is rewritten with the slimmed
 files' sizes and sha256, so the store takes the artifact as complete. A slimmed artifact cannot be
 resumed exactly: `--resume` needs the environments' state.
 """
@@ -50,23 +51,40 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def pack(artifact: Path, archive: Path) -> None:
-    """Slim `artifact`'s checkpoints in place and write it to `archive` as `<stage>/<robot>/<motion>/<key>/`."""
+    """Slim `artifact` and the shorter runs it continued, in place, and archive them all as
+    `<stage>/<robot>/<motion>/<key>/` (a grown run's time is the sum of its runs')."""
+    chain = _runs_behind(artifact)
+    for run in chain:
+        _slim_artifact(run, whole_newest=run == artifact)
+    archive.parent.mkdir(parents=True, exist_ok=True)
+    with tarfile.open(archive, "w:xz") as tar:
+        for run in chain:
+            tar.add(run, arcname=run.relative_to(run.parents[3]))
+    print(f"packed {[run.name for run in chain]} into {archive} ({archive.stat().st_size} bytes)")
+
+
+def _runs_behind(artifact: Path) -> list[Path]:
+    """`artifact` and every run it continued that is still beside it."""
     manifest_path = artifact / MANIFEST
     if not manifest_path.is_file():
         raise PipelineError(f"{artifact}: no {MANIFEST}; not a finished artifact")
+    earlier = json.loads(manifest_path.read_text())["metrics"].get("continued_from")
+    if earlier and (artifact.parent / earlier).is_dir():
+        return [*_runs_behind(artifact.parent / earlier), artifact]
+    return [artifact]
+
+
+def _slim_artifact(artifact: Path, whole_newest: bool) -> None:
+    manifest_path = artifact / MANIFEST
     manifest = json.loads(manifest_path.read_text())
     checkpoints = sorted(
         (name for name in manifest["files"] if name.endswith(".pt")),
         key=lambda name: int(Path(name).stem.split("_")[-1]),
     )
     for name in checkpoints:
-        _slim(artifact / name, whole_algorithm=name == checkpoints[-1])
+        _slim(artifact / name, whole_algorithm=whole_newest and name == checkpoints[-1])
         manifest["files"][name] = {"sha256": file_sha256(artifact / name), "size": (artifact / name).stat().st_size}
     manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
-    archive.parent.mkdir(parents=True, exist_ok=True)
-    with tarfile.open(archive, "w:xz") as tar:
-        tar.add(artifact, arcname=artifact.relative_to(artifact.parents[3]))
-    print(f"packed {len(checkpoints)} checkpoints of {artifact} into {archive} ({archive.stat().st_size} bytes)")
 
 
 def _slim(checkpoint: Path, whole_algorithm: bool) -> None:
@@ -79,13 +97,14 @@ def _slim(checkpoint: Path, whole_algorithm: bool) -> None:
 
 
 def unpack(archive: Path, store: Path) -> None:
-    """Extract a packed artifact into `store`, refusing one that is already there."""
+    """Extract packed artifacts into `store`, refusing any that is already there."""
     with tarfile.open(archive, "r:xz") as tar:
-        top = Path(tar.getnames()[0])
-        if (store / top).exists():
-            raise PipelineError(f"{store / top} already exists")
+        tops = sorted({Path(*Path(name).parts[:4]) for name in tar.getnames() if len(Path(name).parts) >= 4})
+        for top in tops:
+            if (store / top).exists():
+                raise PipelineError(f"{store / top} already exists")
         tar.extractall(store, filter="data")
-    print(f"unpacked {top} into {store}")
+    print(f"unpacked {[str(top) for top in tops]} into {store}")
 
 
 if __name__ == "__main__":

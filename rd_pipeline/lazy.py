@@ -8,6 +8,10 @@ once and loaded on its first attribute access (the standard library's `LazyLoade
 Importing a submodule (`torch.distributed`) of a module still deferred finds it half-loaded: on
 torch 2.11 with Python 3.12.3 that raised an AttributeError, on torch 2.13 with Python 3.11 it
 aborts the process. So code that runs, not plans, calls `load_deferred` first.
+
+CPython 3.12.3's `LazyLoader` recurses without end when a module deletes one of its own attributes
+while it loads (torch does; CPython gh-117178, fixed in 3.12.4). Ubuntu 24.04's Python and the GPU
+lease's image are 3.12.3, so there modules load at once.
 """
 
 from __future__ import annotations
@@ -19,11 +23,16 @@ from types import ModuleType
 _deferred: list[ModuleType] = []
 """Every module `lazy_import` deferred, loaded or not."""
 
+LAZY_LOADER_BROKEN = sys.version_info[:3] == (3, 12, 3)
+"""Whether this interpreter's `LazyLoader` has the self-deleting-attribute recursion."""
+
 
 def lazy_import(name: str) -> ModuleType:
     """The module `name`, already imported or loaded on first use."""
     if name in sys.modules:
         return sys.modules[name]
+    if LAZY_LOADER_BROKEN:
+        return importlib.import_module(name)
     spec = importlib.util.find_spec(name)
     if spec is None or spec.loader is None:
         raise ModuleNotFoundError(f"No module named '{name}'", name=name)

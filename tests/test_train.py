@@ -14,6 +14,7 @@ from conftest import cli, h1_2_dance_env
 
 from rd_pipeline.api.workspace import training_runs, training_seconds
 from rd_pipeline.artifacts.stage import build_params
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.params import parse_assignments
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.ppo import build_ppo
@@ -229,6 +230,10 @@ def test_a_longer_run_with_resume_continues_the_shorter_one_bit_for_bit(artifact
     durations = [json.loads((run / "manifest.json").read_text())["duration_s"] for run in (short, grown)]
     assert [seconds for _, seconds in runs] == durations
     assert training_seconds(grown) == pytest.approx(sum(durations))
+    with pytest.raises(PipelineError, match=f"continues run {short.name}, which is no longer in the store"):
+        training_runs(tmp_path / "grown")
+    gone = training_runs(tmp_path / "grown", {short.name: 1.5})
+    assert gone == [(short.name, 1.5), (grown.name, durations[1])]
     scratch = cli(*args, "--force", "--set", "train.iterations=4", "train.checkpoint_every=1")
     assert scratch.returncode == 0 and "continuing" not in scratch.stderr
     assert sorted(p.name for p in (short / "checkpoints").iterdir()) == ["model_1.pt", "model_2.pt"]

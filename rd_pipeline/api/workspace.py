@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -204,17 +205,21 @@ def training_checkpoints(train: Path) -> dict[int, Path]:
     return checkpoints_by_iteration(train)
 
 
-def training_runs(train: Path) -> list[tuple[str, float]]:
+def training_runs(train: Path, gone: Mapping[str, float] | None = None) -> list[tuple[str, float]]:
     """(key, seconds) of each run behind a train artifact, oldest first: a grown training continues
-    the shorter runs before it."""
+    the shorter runs before it. `gone` gives the seconds of runs no longer in the store (a GPU
+    lease's probe left on its machine), as their runs printed them."""
+    gone = gone or {}
     manifest = json.loads((train / MANIFEST).read_text())
     this_run = (manifest["key"], manifest["duration_s"])
     earlier = manifest["metrics"].get("continued_from")
     if not earlier:
         return [this_run]
+    if earlier in gone:
+        return [(earlier, gone[earlier]), this_run]
     if not (train.parent / earlier / MANIFEST).is_file():
         raise PipelineError(f"{train}: continues run {earlier}, which is no longer in the store; its time is unknown")
-    return [*training_runs(train.parent / earlier), this_run]
+    return [*training_runs(train.parent / earlier, gone), this_run]
 
 
 def training_seconds(train: Path) -> float:
