@@ -1,0 +1,131 @@
+"""Benchmark: where learning starts on a clip, as survival of zero outputs on the training model.
+
+    python bench/initial_policy.py [--windows g1:dance1_subject2:11:21 h1_2:dance2_subject4:193:203 ...]
+        [--starts 10] [--modes selective all] [--out bench/results/initial_policy]
+
+A freshly initialized actor outputs about zero. Under `selective` (the paper's mask) that holds
+every joint but hip and knee pitch at the default pose while the reference dances; under `all`
+it feeds the reference to PD, the validation's zero-action baseline. For each window this rolls
+out zero outputs under each mode from `--starts` evenly spaced frames on the nominal training
+model (primitive collision, training terminations, no randomization) and writes the seconds
+survived per start, with the reference's joint speed (p95 per second). Writes `<out>.json` and
+`<out>.md`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import statistics
+import sys
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from rd_pipeline.api import workspace
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion.activity import joint_speed_p95_per_second
+from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+from rd_pipeline.rl.env import TrackingEnv
+from rd_pipeline.rl.env_config import EnvConfig
+from rd_pipeline.rl.evaluate import nominal, scoring_starts, survival, zero_action
+from rd_pipeline.rl.training_config import clip_frames
+from rd_pipeline.robots import Robot, load_robot
+from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
+from rd_pipeline.sampling.segments import segment_bounds
+
+WINDOWS = ("g1:dance1_subject2:11:21", "h1_2:dance2_subject4:193:203")
+"""The CPU and GPU dance windows of issue 31: G1's study window and H1-2's busiest ten seconds."""
+
+
+def main() -> None:
+    args = _parser().parse_args()
+    try:
+        rows = [_window(window, args.modes, args.starts) for window in args.windows]
+    except (PipelineError, ValueError) as exc:
+        sys.exit(f"error: {exc}")
+    result = {"starts": args.starts, "modes": args.modes, "windows": rows}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
+    args.out.with_suffix(".md").write_text(_table(result))
+    print(_table(result))
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--windows", nargs="+", default=list(WINDOWS), help="robot:motion:start:end (seconds)")
+    parser.add_argument("--modes", nargs="+", default=["selective", "all"], help="action modes (residual presets)")
+    parser.add_argument("--starts", type=int, default=10)
+    parser.add_argument("--out", type=Path, default=Path("bench/results/initial_policy"))
+    return parser
+
+
+def _window(window: str, modes: list[str], starts: int) -> dict[str, Any]:
+    robot_name, motion, start_s, end_s = _split(window)
+    clip = f"{start_s}:{end_s}"
+    reference = _reference(robot_name, motion, clip)
+    robot = load_robot(robot_name)
+    survival_s = {mode: _zero_output_survival(robot, reference, mode, starts) for mode in modes}
+    return {
+        "robot": robot_name,
+        "motion": motion,
+        "clip": clip,
+        "survival_s": survival_s,
+        "median_s": {mode: statistics.median(values) for mode, values in survival_s.items()},
+        "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(reference),
+    }
+
+
+def _split(window: str) -> tuple[str, str, str, str]:
+    parts = window.split(":")
+    if len(parts) != 4:
+        raise ValueError(f"--windows {window!r}: expected robot:motion:start:end")
+    robot, motion, start, end = parts
+    return robot, motion, start, end
+
+
+def _reference(robot: str, motion: str, clip: str) -> ReferenceMotion:
+    """The clip of the reference the pipeline trains on (made up to `prior` if not yet there)."""
+    plan = workspace.plan(robot, motion, "cpu")
+    workspace.run(plan, until="prior", resume=True)
+    source = workspace.artifact(plan, workspace.providing(plan, "reference"))
+    if source is None:
+        raise PipelineError(f"no reference artifact for {robot}/{motion}")
+    reference = ReferenceMotion.load(source / REFERENCE_FILE)
+    start, end = clip_frames(clip, reference.fps, reference.n_frames)
+    return reference.frames(start, end)
+
+
+def _zero_output_survival(robot: Robot, reference: ReferenceMotion, mode: str, starts: int) -> list[float]:
+    segment_starts, lengths = segment_bounds(reference.n_frames, reference.fps, 1.0, 0.25)
+    sampler = SegmentSampler(SamplerConfig(), torch.ones(len(segment_starts)), seed=0)
+    base = EnvConfig(backend="cpu")
+    config = nominal(dataclasses.replace(base, actions=dataclasses.replace(base.actions, mode=mode)), starts)
+    env = TrackingEnv(robot, reference, sampler, segment_starts, lengths, config, seed=0)
+    seconds = survival(env, zero_action(env.num_actions), scoring_starts(env.max_episode_length, starts))
+    return [round(float(value), 2) for value in seconds]
+
+
+def _table(result: dict[str, Any]) -> str:
+    modes = result["modes"]
+    lines = [
+        "# Zero outputs on the nominal training model: seconds survived per start",
+        "",
+        "| robot | motion | clip | joint speed p95 (rad/s, per second) | "
+        + " | ".join(f"{mode} (median; per start)" for mode in modes)
+        + " |",
+        "|---|---|---|---|" + "---|" * len(modes),
+    ]
+    for row in result["windows"]:
+        speeds = ", ".join(f"{value:.1f}" for value in row["reference_joint_speed_p95_by_second"])
+        cells = [
+            f"{row['median_s'][mode]:.2f}; {', '.join(f'{v:.2f}' for v in row['survival_s'][mode])}" for mode in modes
+        ]
+        lines.append(f"| {row['robot']} | {row['motion']} | {row['clip']} | {speeds} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    main()
