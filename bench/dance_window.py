@@ -52,6 +52,7 @@ OPTIONS = {
     "action_mode": ("env", "actions", "mode"),
     "sampler": ("sampler", "mode"),
     "failure_credit": ("sampler", "failure_credit"),
+    "motion_far_height_only": ("env", "terminations", "motion_far_height_only"),
     "mixed_precision": ("ppo", "mixed_precision"),
     "ranks": ("ranks",),
     "seed": ("seed",),

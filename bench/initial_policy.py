@@ -5,8 +5,9 @@
 
 A freshly initialized actor outputs about zero. Under `selective` (the paper's mask) that holds
 every joint but hip and knee pitch at the default pose while the reference dances; under `all`
-it feeds the reference to PD, the validation's zero-action baseline. For each window this rolls
-out zero outputs under each mode from `--starts` evenly spaced frames on the nominal training
+it feeds the reference to PD, the validation's zero-action baseline. `selective:z` is the paper's
+mask with height-only motion-far terminations (`motion_far_height_only`, the anchors' lenient
+ones). For each window this rolls out zero outputs under each mode from `--starts` evenly spaced frames on the nominal training
 model (primitive collision, training terminations, no randomization) and writes the seconds
 survived per start, with the reference's joint speed (p95 per second). Writes `<out>.json` and
 `<out>.md`.
@@ -56,7 +57,12 @@ def main() -> None:
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--windows", nargs="+", default=list(WINDOWS), help="robot:motion:start:end (seconds)")
-    parser.add_argument("--modes", nargs="+", default=["selective", "all"], help="action modes (residual presets)")
+    parser.add_argument(
+        "--modes",
+        nargs="+",
+        default=["selective", "all", "selective:z"],
+        help="action modes (residual presets); `:z` appended: height-only motion-far terminations",
+    )
     parser.add_argument("--starts", type=int, default=10)
     parser.add_argument("--out", type=Path, default=Path("bench/results/initial_policy"))
     return parser
@@ -98,11 +104,15 @@ def _reference(robot: str, motion: str, clip: str) -> ReferenceMotion:
     return reference.frames(start, end)
 
 
-def _zero_output_survival(robot: Robot, reference: ReferenceMotion, mode: str, starts: int) -> list[float]:
+def _zero_output_survival(robot: Robot, reference: ReferenceMotion, variant: str, starts: int) -> list[float]:
+    """`variant`: an action mode, `:z` appended for height-only motion-far terminations."""
+    mode, _, axes = variant.partition(":")
     segment_starts, lengths = segment_bounds(reference.n_frames, reference.fps, 1.0, 0.25)
     sampler = SegmentSampler(SamplerConfig(), torch.ones(len(segment_starts)), seed=0)
     base = EnvConfig(backend="cpu")
-    config = nominal(dataclasses.replace(base, actions=dataclasses.replace(base.actions, mode=mode)), starts)
+    terminations = dataclasses.replace(base.terminations, motion_far_height_only=axes == "z")
+    actions = dataclasses.replace(base.actions, mode=mode)
+    config = nominal(dataclasses.replace(base, actions=actions, terminations=terminations), starts)
     env = TrackingEnv(robot, reference, sampler, segment_starts, lengths, config, seed=0)
     seconds = survival(env, zero_action(env.num_actions), scoring_starts(env.max_episode_length, starts))
     return [round(float(value), 2) for value in seconds]

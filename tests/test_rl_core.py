@@ -345,6 +345,12 @@ def test_an_episode_fails_when_any_termination_term_fires(monkeypatch: pytest.Mo
     far[1, 2, 2] += 0.6  # env 1: a termination body 0.6 m above its reference
     assert terminations.failed(_state(body_pos=far), context).tolist() == [False, True, False]
     assert not terminations.failed(_state(body_pos=far), dataclasses.replace(context, motion_far_m=0.7)).any()
+    aside = on_reference.body_pos.clone()
+    aside[0, 1, 0] += 0.6  # env 0: a termination body 0.6 m beside its reference
+    height_only = dataclasses.replace(context, config=TerminationsConfig(motion_far_height_only=True))
+    assert terminations.failed(_state(body_pos=aside), context).tolist() == [True, False, False]
+    assert terminations.failed(_state(body_pos=aside), height_only).tolist() == [False] * N
+    assert terminations.failed(_state(body_pos=far), height_only).tolist() == [False, True, False]
     monkeypatch.setattr(terminations, "TERMINATION_TERMS", dict(terminations.TERMINATION_TERMS))
 
     @terminations.termination_term

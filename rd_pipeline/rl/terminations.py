@@ -35,12 +35,21 @@ class TerminationsConfig:
     """The curriculum never tightens the motion-far distance below this ..."""
     motion_far_max_m: float = 0.5
     """... nor loosens it above this."""
+    motion_far_height_only: bool = False
+    """Count only a termination body's height error (BeyondMimic's and mjlab's lenient `z_only`
+    terminations on the anchor and end effectors): a hand off to the side of its reference keeps
+    the episode, a pelvis sinking or a foot lifting ends it. Training only: validation judges
+    with the paper's terms."""
 
 
-def motion_far(body_pos: torch.Tensor, ref_body_pos: torch.Tensor, limit_m: float) -> torch.Tensor:
-    """(N,) True where any of the (N, B, 3) bodies is farther than `limit_m` from its reference."""
-    gap = (body_pos - ref_body_pos).norm(dim=-1).max(dim=-1).values
-    return gap > limit_m
+def motion_far(
+    body_pos: torch.Tensor, ref_body_pos: torch.Tensor, limit_m: float, height_only: bool = False
+) -> torch.Tensor:
+    """(N,) True where any of the (N, B, 3) bodies is farther than `limit_m` from its reference
+    (with `height_only`, above or below it)."""
+    offset = body_pos - ref_body_pos
+    gap = offset[..., 2].abs() if height_only else offset.norm(dim=-1)
+    return gap.max(dim=-1).values > limit_m
 
 
 def bad_orientation(root_quat: torch.Tensor, ref_root_quat: torch.Tensor, limit_rad: float) -> torch.Tensor:
@@ -78,7 +87,8 @@ def termination_term(function: TerminationTerm) -> TerminationTerm:
 @termination_term
 def far_from_motion(s: TrackingState, c: TerminationContext) -> torch.Tensor:
     """A termination body farther than the curriculum's motion-far distance from its reference."""
-    return motion_far(s.body_pos[:, c.bodies], s.ref_body_pos[:, c.bodies], c.motion_far_m)
+    bodies = c.bodies
+    return motion_far(s.body_pos[:, bodies], s.ref_body_pos[:, bodies], c.motion_far_m, c.config.motion_far_height_only)
 
 
 @termination_term
