@@ -25,6 +25,7 @@ from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.files import file_sha256
 from rd_pipeline.paths import artifacts_dir
+from rd_pipeline.rl.training_log import checkpoints_by_iteration
 
 
 def main() -> None:
@@ -77,13 +78,11 @@ def _runs_behind(artifact: Path) -> list[Path]:
 def _slim_artifact(artifact: Path, whole_newest: bool) -> None:
     manifest_path = artifact / MANIFEST
     manifest = json.loads(manifest_path.read_text())
-    checkpoints = sorted(
-        (name for name in manifest["files"] if name.endswith(".pt")),
-        key=lambda name: int(Path(name).stem.split("_")[-1]),
-    )
-    for name in checkpoints:
-        _slim(artifact / name, whole_algorithm=whole_newest and name == checkpoints[-1])
-        manifest["files"][name] = {"sha256": file_sha256(artifact / name), "size": (artifact / name).stat().st_size}
+    checkpoints = list(checkpoints_by_iteration(artifact).values())
+    for path in checkpoints:
+        _slim(path, whole_algorithm=whole_newest and path == checkpoints[-1])
+        name = path.relative_to(artifact).as_posix()
+        manifest["files"][name] = {"sha256": file_sha256(path), "size": path.stat().st_size}
     manifest_path.write_text(json.dumps(manifest, indent=2) + "\n")
 
 

@@ -1,16 +1,16 @@
 """Benchmark: where learning starts on a clip, as survival of zero outputs on the training model.
 
     python bench/initial_policy.py [--windows g1:dance1_subject2:11:21 h1_2:dance2_subject4:193:203 ...]
-        [--starts 10] [--modes selective all] [--out bench/results/initial_policy]
+        [--starts 10] [--modes selective all selective:z] [--out bench/results/initial_policy]
 
 A freshly initialized actor outputs about zero. Under `selective` (the paper's mask) that holds
 every joint but hip and knee pitch at the default pose while the reference dances; under `all`
 it feeds the reference to PD, the validation's zero-action baseline. `selective:z` is the paper's
 mask with height-only motion-far terminations (`motion_far_height_only`, the anchors' lenient
-ones). For each window this rolls out zero outputs under each mode from `--starts` evenly spaced frames on the nominal training
-model (primitive collision, training terminations, no randomization) and writes the seconds
-survived per start, with the reference's joint speed (p95 per second). Writes `<out>.json` and
-`<out>.md`.
+ones). For each window this rolls out zero outputs under each mode from `--starts` evenly spaced
+frames on the nominal training model (primitive collision, training terminations, no
+randomization) and writes the seconds survived per start, with the reference's joint speed (p95
+per second). Writes `<out>.json` and `<out>.md`.
 """
 
 from __future__ import annotations
