@@ -38,7 +38,6 @@ from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.validation_report import ValidationReport
 from rd_pipeline.motion.activity import busiest_window, joint_speed_p95_per_second
-from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.rl.training_log import read_training_log
 
 OPTIONS = {
@@ -115,8 +114,7 @@ def _busiest_clip(args: argparse.Namespace) -> str:
     """The `--busiest` window of the whole take's reference (made by the pipeline up to `prior`)."""
     whole = workspace.plan(args.robot, args.motion, args.profile, seed=args.seed)
     workspace.run(whole, until="prior", resume=True)
-    source = _artifact(whole, workspace.providing(whole, "reference"))
-    window = busiest_window(ReferenceMotion.load(source / REFERENCE_FILE), args.busiest)
+    window = busiest_window(workspace.reference(whole), args.busiest)
     print(f"busiest {args.busiest} s window: {window.clip} s, joint speed p95 {window.joint_speed_p95} rad/s")
     return window.clip
 
@@ -159,8 +157,7 @@ def _result(plan: workspace.Plan, clip: str, commit: str, gone: dict[str, float]
     details = validation.details
     per_start = {name: details["nominal"][name]["per_start"] for name in ("policy", "zero_action")}
     reference_clip = details["reference"]
-    source = _artifact(plan, reference_clip["stage"])
-    reference = ReferenceMotion.load(source / REFERENCE_FILE)
+    reference = workspace.reference(plan, reference_clip["stage"])
     clipped = reference.frames(reference_clip["start_frame"], reference_clip["end_frame"])
     return {
         "robot": plan.robot,

@@ -28,7 +28,7 @@ import torch
 from rd_pipeline.api import workspace
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.activity import joint_speed_p95_per_second
-from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.evaluate import nominal, scoring_starts, survival, zero_action
@@ -96,10 +96,7 @@ def _reference(robot: str, motion: str, clip: str) -> ReferenceMotion:
     """The clip of the reference the pipeline trains on (made up to `prior` if not yet there)."""
     plan = workspace.plan(robot, motion, "cpu")
     workspace.run(plan, until="prior", resume=True)
-    source = workspace.artifact(plan, workspace.providing(plan, "reference"))
-    if source is None:
-        raise PipelineError(f"no reference artifact for {robot}/{motion}")
-    reference = ReferenceMotion.load(source / REFERENCE_FILE)
+    reference = workspace.reference(plan)
     start, end = clip_frames(clip, reference.fps, reference.n_frames)
     return reference.frames(start, end)
 

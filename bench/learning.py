@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from rd_pipeline.api import workspace
-from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal, survival, zero_action
 from rd_pipeline.rl.ppo import build_ppo
@@ -44,10 +44,10 @@ def main() -> None:
     args = parser.parse_args()
     plan = workspace.plan(args.robot, args.motion, args.profile, overrides=(f"train.clip={args.clip}", *args.set))
     params: TrainConfig = plan.stage("train").params
-    folder = workspace.artifact(plan, workspace.providing(plan, "reference"))
-    if folder is None:
-        sys.exit(f"no reference artifact for {args.robot}/{args.motion}: run `rd-pipeline run --until stats` first")
-    reference = ReferenceMotion.load(folder / REFERENCE_FILE)
+    try:
+        reference = workspace.reference(plan)
+    except PipelineError as exc:
+        sys.exit(f"error: {exc}")
     robot = load_robot(args.robot)
     start, end = clip_frames(params.clip, reference.fps, reference.n_frames)
     reference = reference.frames(start, end)

@@ -29,7 +29,6 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.report import REPORT_MD, SURVIVAL_PLOT
 from rd_pipeline.evaluation.validation_report import ValidationReport
 from rd_pipeline.motion.activity import joint_speed_p95_per_second
-from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.rl.training_log import read_training_log
 from rd_pipeline.stages.train import CURVE_FILE, PROFILE_FILE
 
@@ -62,8 +61,7 @@ def main() -> None:
     report = validation.details
     clip = report["reference"]
     # The reference the report validated against, whichever stage made it (retarget or import).
-    source = workspace.artifact(plan, clip["stage"])
-    reference = ReferenceMotion.load(source / REFERENCE_FILE).frames(clip["start_frame"], clip["end_frame"])
+    reference = workspace.reference(plan, clip["stage"]).frames(clip["start_frame"], clip["end_frame"])
     per_start = {name: report["nominal"][name]["per_start"] for name in ("policy", "zero_action")}
     policy = report["nominal"]["policy"]
     params = manifest["params"]

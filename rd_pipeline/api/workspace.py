@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 
@@ -34,6 +34,9 @@ from rd_pipeline.rl.training_config import clip_frames
 from rd_pipeline.rl.training_log import checkpoints_by_iteration, read_training_log
 from rd_pipeline.robots.config import load_robot_config
 from rd_pipeline.stages import REGISTRY
+
+if TYPE_CHECKING:
+    from rd_pipeline.motion.reference import ReferenceMotion
 
 
 @dataclass(frozen=True)
@@ -155,6 +158,18 @@ def artifact(plan: Plan, stage: str) -> Path | None:
     robot = plan.robot if entry.stage.per_robot else None
     found = plan.store.find(stage, robot, plan.motion, entry.key)
     return found.path if found else None
+
+
+def reference(plan: Plan, stage: str | None = None) -> ReferenceMotion:
+    """The whole take's reference motion in the store, as `stage` made it (default: the stage of
+    this plan's chain that provides it, retarget or import)."""
+    from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion  # MuJoCo loads when used
+
+    stage = stage or providing(plan, "reference")
+    folder = artifact(plan, stage)
+    if folder is None:
+        raise PipelineError(f"stage '{stage}' has no artifact for {plan.robot}/{plan.motion}: run it first")
+    return ReferenceMotion.load(folder / REFERENCE_FILE)
 
 
 def status(plan: Plan, verify: bool = False) -> list[dict[str, Any]]:

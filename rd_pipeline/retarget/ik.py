@@ -17,7 +17,7 @@ from rd_pipeline.retarget.config import IkConfig, IkWeights
 from rd_pipeline.retarget.floor import FloorLimit
 from rd_pipeline.retarget.limits import FrameStepLimit
 from rd_pipeline.retarget.targets import RetargetTargets
-from rd_pipeline.retarget.tasks import frame_tasks, position_cost_schedule, posture_task, target_poses
+from rd_pipeline.retarget.tasks import key_bodies_task, position_cost_schedule, posture_task, target_poses
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.hulls import BodyHulls
 from rd_pipeline.robots.model import collision_geom_pairs
@@ -40,7 +40,7 @@ class RetargetIk:
         model = robot.model
         config = robot.config
         self.configuration = mink.Configuration(model)
-        self.frame_tasks = frame_tasks(targets, config, weights, settings.lm_damping)
+        self.key_bodies = key_bodies_task(robot, targets, weights, settings.lm_damping)
         self.position_costs = position_cost_schedule(targets, config, weights)
         self.applied_costs: np.ndarray | None = None
         self.posture = posture_task(robot, self.configuration, weights.posture)
@@ -61,7 +61,7 @@ class RetargetIk:
         self.limits: list[mink.Limit] = [self.step_limit, self.floor]
         if avoidance is not None:
             self.limits.append(avoidance)
-        self.tasks = [*self.frame_tasks, self.posture]
+        self.tasks = [self.key_bodies, self.posture]
         self.damping = weights.damping
         self.key_body_ids = np.array([robot.body_ids[b] for b in targets.bodies])
         self.target_poses = target_poses(targets)
@@ -88,11 +88,9 @@ class RetargetIk:
         # with are the ones the tasks hold, not the previous frame's.
         frame_costs = self.position_costs[t]
         if self.applied_costs is None or np.any(frame_costs != self.applied_costs):
-            for task, cost in zip(self.frame_tasks, frame_costs):
-                task.set_position_cost(cost)
+            self.key_bodies.set_position_costs(frame_costs)
             self.applied_costs = frame_costs
-        for task, pose in zip(self.frame_tasks, self.target_poses[t]):
-            task.set_target(mink.SE3(wxyz_xyz=pose))
+        self.key_bodies.set_targets(self.target_poses[t])
 
     def refine_feet(
         self,
@@ -110,10 +108,10 @@ class RetargetIk:
         survives where the feet need no help.
         """
         config = self.robot.config
-        feet = set(config.foot_bodies)
-        foot_tasks = [task for task, body in zip(self.frame_tasks, self.targets.bodies) if body in feet]
+        columns = [self.targets.bodies.index(foot) for foot in config.foot_bodies]
+        feet = self.key_bodies.select(columns)
         hold = mink.PostureTask(self.robot.model, cost=self.settings.refine_posture_cost)
-        tasks: list[mink.Task] = [*foot_tasks, hold]
+        tasks: list[mink.Task] = [feet, hold]
         pelvis = None
         if root_slack_m > 0:
             pelvis = mink.FrameTask(config.root_body, "body", self.settings.refine_posture_cost, 0.0)
@@ -124,6 +122,8 @@ class RetargetIk:
         out = (smoothed if start is None else start).copy()
         for t in frames:
             self._set_frame_targets(t)
+            feet.set_targets(self.key_bodies.targets[columns])
+            feet.set_position_costs(self.key_bodies.body_costs[columns, :3])
             hold.set_target(smoothed[t])
             self.configuration.update(smoothed[t])
             if pelvis is not None:

@@ -1,11 +1,14 @@
-"""The IK's tasks: a frame task per key body, with its target poses and per-frame position costs,
-and the posture that holds the joints the key bodies leave free."""
+"""The IK's tasks: mink's frame task on every key body (batched into one task), with its target
+poses and per-frame position costs, and the posture that holds the joints the key bodies leave free."""
 
 from __future__ import annotations
 
 import mink
 import mujoco
 import numpy as np
+
+# mink's native Lie operations, which its FrameTask uses: the same arithmetic, to the bit.
+from mink.lie import _lie_ops_c as lie
 
 from rd_pipeline.retarget.config import IkWeights
 from rd_pipeline.retarget.smoothing import smoothstep
@@ -14,36 +17,102 @@ from rd_pipeline.robots import Robot
 from rd_pipeline.robots.config import RobotConfig
 
 
-def frame_tasks(
+class KeyBodiesTask(mink.Task):
+    """mink.FrameTask on each of several bodies, as one task.
+
+    The error and Jacobian of each body are FrameTask's, computed with the same native Lie
+    operations in the same order, and stacked in body order: the QP is the one a list of frame
+    tasks builds, bit for bit. One task instead of a dozen cuts the Python work of assembling
+    each QP (a third of a retarget's time on G1 floor work) by about half.
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        body_ids: np.ndarray,
+        orientation_costs: np.ndarray,
+        lm_damping: float,
+    ) -> None:
+        cost = np.ones((len(body_ids), 6))
+        cost[:, 3:] = np.asarray(orientation_costs)[:, None]
+        super().__init__(cost=cost.reshape(-1), lm_damping=lm_damping)
+        self.model = model
+        self.body_ids = [int(body) for body in body_ids]
+        self.body_costs = cost
+        self.targets = np.zeros((len(body_ids), 7))
+        self.targets[:, 0] = 1.0
+        self.world_jacobian = np.empty((6, model.nv))
+        self.errors = np.empty(6 * len(body_ids))
+        self.jacobians = np.empty((6 * len(body_ids), model.nv))
+
+    def set_targets(self, poses: np.ndarray) -> None:
+        """(K, 7) wxyz_xyz target pose of each body."""
+        self.targets[:] = poses
+
+    def set_position_costs(self, costs: np.ndarray) -> None:
+        """(K, 3) position cost of each body along its own axes."""
+        self.body_costs[:, :3] = costs
+        self.cost = self.body_costs.reshape(-1)
+
+    def select(self, columns: list[int]) -> KeyBodiesTask:
+        """A task over some of the bodies, with their costs; its targets are set separately."""
+        orientation_costs = self.body_costs[columns, 3]
+        return KeyBodiesTask(self.model, np.array(self.body_ids)[columns], orientation_costs, self.lm_damping)
+
+    def compute_error(self, configuration: mink.Configuration) -> np.ndarray:
+        return self._errors_and_jacobians(configuration)[0].copy()
+
+    def compute_jacobian(self, configuration: mink.Configuration) -> np.ndarray:
+        return self._errors_and_jacobians(configuration)[1].copy()
+
+    def compute_qp_residual(self, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray, float]:
+        errors, jacobians = self._errors_and_jacobians(configuration)
+        weighted_errors = self.cost * (-self.gain * errors)
+        weighted_jacobians = self.cost[:, None] * jacobians
+        mu = 0.0
+        # Summed body by body, as mink sums the frame tasks' terms.
+        for body_error in weighted_errors.reshape(-1, 6):
+            mu += self.lm_damping * float(body_error @ body_error)
+        return weighted_jacobians, weighted_errors, mu
+
+    def _errors_and_jacobians(self, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray]:
+        """(6K,) body twists to the targets and (6K, nv) their Jacobians, in the body frames."""
+        data = configuration.data
+        for k, (body, target) in enumerate(zip(self.body_ids, self.targets)):
+            rows = slice(6 * k, 6 * k + 6)
+            xmat = data.xmat[body]
+            frame = lie.xmat_xpos_to_wxyz_xyz(xmat, data.xpos[body])
+            mujoco.mj_jacBody(self.model, data, self.world_jacobian[:3], self.world_jacobian[3:], body)
+            body_jacobian = lie.se3_rotation_adjoint_from_xmat(xmat) @ self.world_jacobian
+            self.errors[rows] = lie.se3_rminus(target, frame)
+            log_jacobian = lie.se3_jlog(lie.se3_inverse_multiply(target, frame))
+            np.matmul(-log_jacobian, body_jacobian, out=self.jacobians[rows])
+        return self.errors, self.jacobians
+
+
+def key_bodies_task(
+    robot: Robot,
     targets: RetargetTargets,
-    config: RobotConfig,
     weights: IkWeights,
     lm_damping: float,
-) -> list[mink.FrameTask]:
-    """One frame task per key body, in `targets.bodies` order; bodies without an orientation
+) -> KeyBodiesTask:
+    """The task over every key body, in `targets.bodies` order; bodies without an orientation
     target get no orientation cost."""
+    config = robot.config
     oriented = set(targets.orientations)
     feet = set(config.foot_bodies)
-    tasks: list[mink.FrameTask] = []
+    orientation_costs = []
     for body in targets.bodies:
         if body == config.root_body:
-            orientation_cost = weights.root_orientation
+            orientation_costs.append(weights.root_orientation)
         elif body in feet:
-            orientation_cost = weights.feet_orientation
+            orientation_costs.append(weights.feet_orientation)
         elif body in oriented:
-            orientation_cost = weights.torso_orientation
+            orientation_costs.append(weights.torso_orientation)
         else:
-            orientation_cost = 0.0
-        tasks.append(
-            mink.FrameTask(
-                body,
-                "body",
-                position_cost=1.0,
-                orientation_cost=orientation_cost,
-                lm_damping=lm_damping,
-            )
-        )
-    return tasks
+            orientation_costs.append(0.0)
+    body_ids = np.array([robot.body_ids[body] for body in targets.bodies])
+    return KeyBodiesTask(robot.model, body_ids, np.array(orientation_costs), lm_damping)
 
 
 def target_poses(targets: RetargetTargets) -> np.ndarray:
