@@ -1,13 +1,14 @@
 """Benchmark: a window of dance learned and validated, grown over as many sittings as it takes.
 
-    python bench/dance_window.py [--robot g1] [--motion dance1_subject2] [--clip 11:21 | --busiest 10]
+    python bench/dance_window.py [--robot g1] [--motion dance1_subject2] [--clip 11:21 | --busiest 10 [--speed-quantile 1]]
         [--profile cpu] [--iterations 3300] [--set stage.param=value ...]
         [--out bench/results/dance_window.json] [--commit SHA]
     python bench/dance_window.py --profile paper --until train --fill-minutes 6   # a GPU lease
 
 Runs the pipeline as `rd-pipeline run --resume` would: an interrupted training continues from its
 last checkpoint, and a longer `--iterations` grows the finished shorter run. `--busiest N` trains
-the N-second window of the take whose reference joint speed (p95) is the highest.
+the N-second window of the take whose reference joint speed (p95) is the highest, or with
+`--speed-quantile Q` the one nearest that quantile of the take's windows (0.5: a typical stretch).
 `--fill-minutes M` first trains `--probe-iterations`, times them, and grows the run to the
 iterations that fill M minutes (the iteration count, not the clock, keys the artifact).
 
@@ -37,7 +38,7 @@ from rd_pipeline.api.workspace import training_runs
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.validation_report import ValidationReport
-from rd_pipeline.motion.activity import busiest_window, joint_speed_p95_per_second
+from rd_pipeline.motion.activity import joint_speed_p95_per_second, window_at_speed_quantile
 from rd_pipeline.rl.training_log import read_training_log
 
 OPTIONS = {
@@ -63,7 +64,7 @@ def main() -> None:
     args = _parser().parse_args()
     try:
         gone = _gone_runs(args.gone_run)
-        clip = args.clip or _busiest_clip(args)
+        clip = args.clip or _window_clip(args)
         plan = _plan(args, clip, args.iterations)
         if args.fill_minutes:
             plan = _fill(args, clip)
@@ -85,7 +86,13 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--robot", default="g1")
     parser.add_argument("--motion", default="dance1_subject2")
     parser.add_argument("--clip", default=None, help="start:end seconds (default: --busiest)")
-    parser.add_argument("--busiest", type=int, default=10, help="window length when --clip is not given")
+    parser.add_argument("--busiest", type=int, default=10, help="window length (s) when --clip is not given")
+    parser.add_argument(
+        "--speed-quantile",
+        type=float,
+        default=1.0,
+        help="which window when --clip is not given: nearest this quantile of the windows' joint speed (1: busiest)",
+    )
     parser.add_argument("--profile", default="cpu")
     parser.add_argument("--iterations", type=int, default=3300)
     parser.add_argument("--seed", type=int, default=0)
@@ -110,12 +117,16 @@ def _plan(args: argparse.Namespace, clip: str, iterations: int) -> workspace.Pla
     return workspace.plan(args.robot, args.motion, args.profile, overrides=sets, seed=args.seed)
 
 
-def _busiest_clip(args: argparse.Namespace) -> str:
-    """The `--busiest` window of the whole take's reference (made by the pipeline up to `prior`)."""
+def _window_clip(args: argparse.Namespace) -> str:
+    """The `--busiest`-second window of the whole take's reference (made by the pipeline up to
+    `prior`) at `--speed-quantile` of its windows' joint speed."""
     whole = workspace.plan(args.robot, args.motion, args.profile, seed=args.seed)
     workspace.run(whole, until="prior", resume=True)
-    window = busiest_window(workspace.reference(whole), args.busiest)
-    print(f"busiest {args.busiest} s window: {window.clip} s, joint speed p95 {window.joint_speed_p95} rad/s")
+    window = window_at_speed_quantile(workspace.reference(whole), args.busiest, args.speed_quantile)
+    print(
+        f"{args.busiest} s window at speed quantile {args.speed_quantile:g}: {window.clip} s, "
+        f"joint speed p95 {window.joint_speed_p95} rad/s"
+    )
     return window.clip
 
 

@@ -2,7 +2,7 @@
 
 A clip of a take can be mostly standing (the 10 s prelude of dance1_subject2 had a joint-speed
 p95 under 1.2 rad/s); a policy that holds it has learned balance, not dance. These figures say
-what a training clip contains and choose the busiest window of a take.
+what a training clip contains and choose a take's window by how fast it moves.
 """
 
 from __future__ import annotations
@@ -39,11 +39,11 @@ def joint_speed_p95_per_second(reference: ReferenceMotion) -> list[float]:
     return [round(float(np.percentile(speeds[s : s + window], 95)), 2) for s in starts]
 
 
-def busiest_window(reference: ReferenceMotion, seconds: int) -> Window:
-    """The `seconds`-long window, on whole seconds, whose joint-speed p95 is the highest.
+def speed_windows(reference: ReferenceMotion, seconds: int) -> list[Window]:
+    """Every `seconds`-long window on whole seconds, in order, with its joint-speed p95.
 
     The p95 over the window (not a mean of per-second figures) so that one violent second
-    does not choose a window of standing."""
+    does not make a window of standing look busy."""
     frames_per_s = round(reference.fps)
     whole_seconds = reference.n_frames // frames_per_s
     if whole_seconds < seconds:
@@ -53,4 +53,19 @@ def busiest_window(reference: ReferenceMotion, seconds: int) -> Window:
     for start in range(whole_seconds - seconds + 1):
         frames = speeds[start * frames_per_s : (start + seconds) * frames_per_s]
         windows.append(Window(start, start + seconds, round(float(np.percentile(frames, 95)), 3)))
-    return max(windows, key=lambda window: window.joint_speed_p95)
+    return windows
+
+
+def busiest_window(reference: ReferenceMotion, seconds: int) -> Window:
+    """The `seconds`-long window whose joint-speed p95 is the highest (the earliest of ties)."""
+    return window_at_speed_quantile(reference, seconds, 1.0)
+
+
+def window_at_speed_quantile(reference: ReferenceMotion, seconds: int, quantile: float) -> Window:
+    """The `seconds`-long window whose joint-speed p95 is nearest that `quantile` of all the take's
+    windows (1: the busiest; 0.5: a typical stretch of the take), the earliest of ties."""
+    if not 0.0 <= quantile <= 1.0:
+        raise ValueError(f"speed quantile {quantile:g} is outside [0, 1]")
+    windows = speed_windows(reference, seconds)
+    target = float(np.quantile([window.joint_speed_p95 for window in windows], quantile))
+    return min(windows, key=lambda window: (abs(window.joint_speed_p95 - target), window.start_s))
