@@ -134,7 +134,7 @@ def _fill(args: argparse.Namespace, clip: str) -> workspace.Plan:
     """Train the probe, time its steady iterations and return the plan that fills the minutes."""
     probe = _plan(args, clip, args.probe_iterations)
     workspace.run(probe, resume=True, until="train")
-    train = _artifact(probe, "train")
+    train = workspace.required_artifact(probe, "train")
     rows = read_training_log(train)
     seconds_per_iteration = statistics.median(row["seconds"] for row in rows[1:])
     spent = json.loads((train / MANIFEST).read_text())["duration_s"]
@@ -156,10 +156,10 @@ def _gone_runs(pairs: list[str]) -> dict[str, float]:
 
 
 def _result(plan: workspace.Plan, clip: str, commit: str, gone: dict[str, float]) -> dict[str, Any]:
-    train = _artifact(plan, "train")
+    train = workspace.required_artifact(plan, "train")
     runs = training_runs(train, gone)
-    export = _artifact(plan, "export")
-    validate = _artifact(plan, "validate")
+    export = workspace.required_artifact(plan, "export")
+    validate = workspace.required_artifact(plan, "validate")
     manifest = json.loads((train / MANIFEST).read_text())
     params = manifest["params"]
     samples = manifest["metrics"]["samples"]
@@ -206,13 +206,6 @@ def _result(plan: workspace.Plan, clip: str, commit: str, gone: dict[str, float]
         "fixed_grid_zero_action_survival_s": per_start["zero_action"]["survival_s"],
         "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(clipped),
     }
-
-
-def _artifact(plan: workspace.Plan, stage: str) -> Path:
-    folder = workspace.artifact(plan, stage)
-    if folder is None:
-        raise PipelineError(f"stage '{stage}' has no artifact for {plan.robot}/{plan.motion}")
-    return folder
 
 
 def _lookup(params: dict[str, Any], path: tuple[str, ...]) -> Any:

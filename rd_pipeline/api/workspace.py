@@ -160,15 +160,20 @@ def artifact(plan: Plan, stage: str) -> Path | None:
     return found.path if found else None
 
 
+def required_artifact(plan: Plan, stage: str) -> Path:
+    """The folder of `stage`'s artifact for this plan's key, or one line saying it is not there."""
+    folder = artifact(plan, stage)
+    if folder is None:
+        raise PipelineError(f"stage '{stage}' has no artifact for {plan.robot}/{plan.motion}: run it first")
+    return folder
+
+
 def reference(plan: Plan, stage: str | None = None) -> ReferenceMotion:
     """The whole take's reference motion in the store, as `stage` made it (default: the stage of
     this plan's chain that provides it, retarget or import)."""
     from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion  # MuJoCo loads when used
 
-    stage = stage or providing(plan, "reference")
-    folder = artifact(plan, stage)
-    if folder is None:
-        raise PipelineError(f"stage '{stage}' has no artifact for {plan.robot}/{plan.motion}: run it first")
+    folder = required_artifact(plan, stage or providing(plan, "reference"))
     return ReferenceMotion.load(folder / REFERENCE_FILE)
 
 

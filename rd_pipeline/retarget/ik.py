@@ -63,7 +63,7 @@ class RetargetIk:
             self.limits.append(avoidance)
         self.tasks = [self.key_bodies, self.posture]
         self.damping = weights.damping
-        self.key_body_ids = np.array([robot.body_ids[b] for b in targets.bodies])
+        self.key_body_ids = np.array(self.key_bodies.body_ids)
         self.target_poses = target_poses(targets)
 
     def initial_configuration(self) -> np.ndarray:

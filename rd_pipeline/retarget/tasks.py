@@ -35,6 +35,7 @@ class KeyBodiesTask(mink.Task):
     ) -> None:
         cost = np.ones((len(body_ids), 6))
         cost[:, 3:] = np.asarray(orientation_costs)[:, None]
+        # The task's cost is a view of the per-body costs: setting one sets the other.
         super().__init__(cost=cost.reshape(-1), lm_damping=lm_damping)
         self.model = model
         self.body_ids = [int(body) for body in body_ids]
@@ -52,7 +53,6 @@ class KeyBodiesTask(mink.Task):
     def set_position_costs(self, costs: np.ndarray) -> None:
         """(K, 3) position cost of each body along its own axes."""
         self.body_costs[:, :3] = costs
-        self.cost = self.body_costs.reshape(-1)
 
     def select(self, columns: list[int]) -> KeyBodiesTask:
         """A task over some of the bodies, with their costs; its targets are set separately."""
