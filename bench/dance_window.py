@@ -69,11 +69,11 @@ def main() -> None:
         if args.fill_minutes:
             plan = _fill(args, clip)
         workspace.run(plan, resume=True, until=args.until)
+        if args.until == "train":
+            return
+        result = _result(plan, clip, args.commit or head_commit(), gone)
     except (PipelineError, ValueError) as exc:
         sys.exit(f"error: {exc}")
-    if args.until == "train":
-        return
-    result = _result(plan, clip, args.commit or head_commit(), gone)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     _plot(result, args.out.with_name(f"{args.out.stem}_curve.png"))
@@ -89,7 +89,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--busiest", type=int, default=10, help="window length (s) when --clip is not given")
     parser.add_argument(
         "--speed-quantile",
-        type=float,
+        type=_quantile,
         default=1.0,
         help="which window when --clip is not given: nearest this quantile of the windows' joint speed (1: busiest)",
     )
@@ -110,6 +110,17 @@ def _parser() -> argparse.ArgumentParser:
         help="a run the training continued that is not in the store (a lease's probe) and its printed seconds",
     )
     return parser
+
+
+def _quantile(text: str) -> float:
+    """A quantile, refused before any stage runs when it is not a number in [0, 1]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"{text} is outside [0, 1]")
+    return value
 
 
 def _plan(args: argparse.Namespace, clip: str, iterations: int) -> workspace.Plan:
