@@ -267,9 +267,10 @@ def _rollouts(
 
 def _bad_contact(model: mujoco.MjModel, data: mujoco.MjData, floor: list[int], allowed: set[int]) -> bool:
     for i in range(data.ncon):
-        g1, g2 = data.contact.geom1[i], data.contact.geom2[i]
-        if g1 in floor or g2 in floor:
-            other = g2 if g1 in floor else g1
+        first = data.contact.geom1[i]
+        second = data.contact.geom2[i]
+        if first in floor or second in floor:
+            other = second if first in floor else first
             if model.geom_bodyid[other] not in allowed:
                 return True
     return False
@@ -282,7 +283,8 @@ def randomized_models(
     drawn per copy: the optional randomized evaluation."""
     out = []
     for _ in range(count):
-        mass, friction = rng.uniform(*ranges.mass_factor), rng.uniform(*ranges.friction_factor)
+        mass = rng.uniform(*ranges.mass_factor)
+        friction = rng.uniform(*ranges.friction_factor)
         kp, kd = rng.uniform(*ranges.pd_factor, size=2)
         out.append(randomized_copy(model, mass, friction, kp, kd))
     return out

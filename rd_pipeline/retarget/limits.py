@@ -23,9 +23,13 @@ class FrameStepLimit(mink.Limit):
         nv: int,
         max_step: np.ndarray,
     ) -> None:
-        self.dof_indices, self.qpos_indices = dof_indices, qpos_indices
-        self.range_lower, self.range_upper, self.max_step = lower, upper, max_step
-        self.lower, self.upper = lower.copy(), upper.copy()
+        self.dof_indices = dof_indices
+        self.qpos_indices = qpos_indices
+        self.range_lower = lower
+        self.range_upper = upper
+        self.max_step = max_step
+        self.lower = lower.copy()
+        self.upper = upper.copy()
         self.projection = np.zeros((len(dof_indices), nv))
         self.projection[np.arange(len(dof_indices)), dof_indices] = 1.0
         # The floating base (dofs 0-5) gets a per-frame step bound too: otherwise, when joints hit
@@ -40,7 +44,8 @@ class FrameStepLimit(mink.Limit):
         may move by `root_max_step` (6,) per tangent axis in this frame."""
         self.root_budget = root_max_step.copy()
         if previous_q is None:
-            self.lower, self.upper = self.range_lower.copy(), self.range_upper.copy()
+            self.lower = self.range_lower.copy()
+            self.upper = self.range_upper.copy()
             return
         joints = previous_q[self.qpos_indices]
         self.lower = np.maximum(self.range_lower, joints - self.max_step)
