@@ -32,9 +32,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 from provenance import head_commit
+from training_hours import training_hours
 
 from rd_pipeline.api import workspace
-from rd_pipeline.api.workspace import training_runs
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.validation_report import ValidationReport
@@ -63,7 +63,6 @@ OPTIONS = {
 def main() -> None:
     args = _parser().parse_args()
     try:
-        gone = _gone_runs(args.gone_run)
         clip = args.clip or _window_clip(args)
         plan = _plan(args, clip, args.iterations)
         if args.fill_minutes:
@@ -71,7 +70,7 @@ def main() -> None:
         workspace.run(plan, resume=True, until=args.until)
         if args.until == "train":
             return
-        result = _result(plan, clip, args.commit or head_commit(), gone)
+        result = _result(plan, clip, args.commit or head_commit())
     except (PipelineError, ValueError) as exc:
         sys.exit(f"error: {exc}")
     args.out.parent.mkdir(parents=True, exist_ok=True)
@@ -102,13 +101,6 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--probe-iterations", type=int, default=5)
     parser.add_argument("--out", type=Path, default=Path("bench/results/dance_window.json"))
     parser.add_argument("--commit", default=None, help="the commit the code ran (default: git's HEAD here)")
-    parser.add_argument(
-        "--gone-run",
-        nargs="*",
-        default=[],
-        metavar="KEY=SECONDS",
-        help="a run the training continued that is not in the store (a lease's probe) and its printed seconds",
-    )
     return parser
 
 
@@ -155,20 +147,8 @@ def _fill(args: argparse.Namespace, clip: str) -> workspace.Plan:
     return _plan(args, clip, iterations)
 
 
-def _gone_runs(pairs: list[str]) -> dict[str, float]:
-    gone = {}
-    for pair in pairs:
-        key, _, seconds = pair.partition("=")
-        try:
-            gone[key] = float(seconds)
-        except ValueError:
-            raise ValueError(f"--gone-run {pair!r}: expected KEY=SECONDS") from None
-    return gone
-
-
-def _result(plan: workspace.Plan, clip: str, commit: str, gone: dict[str, float]) -> dict[str, Any]:
+def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
     train = workspace.required_artifact(plan, "train")
-    runs = training_runs(train, gone)
     export = workspace.required_artifact(plan, "export")
     validate = workspace.required_artifact(plan, "validate")
     manifest = json.loads((train / MANIFEST).read_text())
@@ -186,7 +166,7 @@ def _result(plan: workspace.Plan, clip: str, commit: str, gone: dict[str, float]
         "motion": plan.motion,
         "clip": clip,
         "samples": samples,
-        "wall_h": round(sum(seconds for _, seconds in runs) / 3600, 3),
+        **training_hours(train),
         "samples_per_s_median": manifest["metrics"]["samples_per_s_median"],
         "commit": commit,
         "start_zero_s": validation.start_zero_survival_s,
@@ -209,7 +189,6 @@ def _result(plan: workspace.Plan, clip: str, commit: str, gone: dict[str, float]
         "E_g_mpbpe": validation.E_g_mpbpe,
         "options": {name: _lookup(params, path) for name, path in OPTIONS.items()},
         "profile": plan.profile,
-        "wall_h_per_run": {key: round(seconds / 3600, 3) for key, seconds in runs},
         "train_key": manifest["key"],
         "export_key": details["policy_key"],
         "fixed_grid_start_s": per_start["policy"]["start_s"],

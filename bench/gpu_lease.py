@@ -21,6 +21,7 @@ from pathlib import Path
 
 import torch
 
+from rd_pipeline.api.workspace import continued_runs
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.files import file_sha256
@@ -53,8 +54,8 @@ def _parser() -> argparse.ArgumentParser:
 
 def pack(artifact: Path, archive: Path) -> None:
     """Slim `artifact` and the shorter runs it continued, in place, and archive them all as
-    `<stage>/<robot>/<motion>/<key>/` (a grown run's time is the sum of its runs')."""
-    chain = _runs_behind(artifact)
+    `<stage>/<robot>/<motion>/<key>/`."""
+    chain = continued_runs(artifact)
     for run in chain:
         _slim_artifact(run, whole_newest=run == artifact)
     archive.parent.mkdir(parents=True, exist_ok=True)
@@ -62,17 +63,6 @@ def pack(artifact: Path, archive: Path) -> None:
         for run in chain:
             tar.add(run, arcname=run.relative_to(run.parents[3]))
     print(f"packed {[run.name for run in chain]} into {archive} ({archive.stat().st_size} bytes)")
-
-
-def _runs_behind(artifact: Path) -> list[Path]:
-    """`artifact` and every run it continued that is still beside it."""
-    manifest_path = artifact / MANIFEST
-    if not manifest_path.is_file():
-        raise PipelineError(f"{artifact}: no {MANIFEST}; not a finished artifact")
-    earlier = json.loads(manifest_path.read_text())["metrics"].get("continued_from")
-    if earlier and (artifact.parent / earlier).is_dir():
-        return [*_runs_behind(artifact.parent / earlier), artifact]
-    return [artifact]
 
 
 def _slim_artifact(artifact: Path, whole_newest: bool) -> None:

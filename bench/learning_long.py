@@ -23,7 +23,7 @@ from pathlib import Path
 from provenance import head_commit
 
 from rd_pipeline.api import workspace
-from rd_pipeline.api.workspace import training_runs, training_seconds
+from rd_pipeline.api.workspace import training_seconds, training_seconds_per_run
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.report import REPORT_MD, SURVIVAL_PLOT
@@ -80,7 +80,7 @@ def main() -> None:
         "training_model_start_zero_s": trained["best_start_zero_s"],
         "final_checkpoint_training_model_start_zero_s": trained["final_start_zero_s"],
         "wall_min": round(training_seconds(train) / 60, 2),
-        "wall_min_per_run": {key: round(seconds / 60, 2) for key, seconds in training_runs(train)},
+        "wall_min_per_run": {key: round(seconds / 60, 2) for key, seconds in training_seconds_per_run(train).items()},
         "samples": trained["samples"],
         "commit": args.commit or head_commit(),
         "physics_dt": params["env"]["physics_dt"],

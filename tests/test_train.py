@@ -12,7 +12,7 @@ import pytest
 import torch
 from conftest import cli, h1_2_dance_env
 
-from rd_pipeline.api.workspace import training_runs, training_seconds
+from rd_pipeline.api.workspace import continued_runs, training_seconds, training_seconds_per_run
 from rd_pipeline.artifacts.stage import build_params
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.params import parse_assignments
@@ -224,16 +224,20 @@ def test_a_longer_run_with_resume_continues_the_shorter_one_bit_for_bit(artifact
     assert longer.returncode == 0, longer.stderr
     assert f"continuing the 2-iteration run {short.name}" in longer.stderr
     (grown,) = [p for p in folder.iterdir() if not p.name.startswith(".") and p != short]
-    shutil.copytree(grown, tmp_path / "grown")
-    runs = training_runs(grown)
-    assert [key for key, _ in runs] == [short.name, grown.name]
+    assert continued_runs(grown) == [short, grown]
+    per_run = training_seconds_per_run(grown)
+    assert list(per_run) == [short.name, grown.name]
+    # the grown log carries the shorter run's rows, so its time is counted from them
+    assert per_run[short.name] == pytest.approx(sum(row["seconds"] for row in read_training_log(short)))
+    assert training_seconds(grown) == pytest.approx(sum(per_run.values()))
     durations = [json.loads((run / "manifest.json").read_text())["duration_s"] for run in (short, grown)]
-    assert [seconds for _, seconds in runs] == durations
-    assert training_seconds(grown) == pytest.approx(sum(durations))
-    with pytest.raises(PipelineError, match=f"continues run {short.name}, which is no longer in the store"):
-        training_runs(tmp_path / "grown")
-    gone = training_runs(tmp_path / "grown", {short.name: 1.5})
-    assert gone == [(short.name, 1.5), (grown.name, durations[1])]
+    assert 0 < training_seconds(grown) < sum(durations)  # start-up and scoring are not iterations
+    # with the shorter run gone from the store, its iterations' time stays with the oldest run left
+    gone = shutil.copytree(grown, tmp_path / "grown")
+    assert continued_runs(gone) == [gone]
+    assert training_seconds_per_run(gone) == {grown.name: pytest.approx(training_seconds(grown))}
+    with pytest.raises(PipelineError, match="no manifest.json; not a finished artifact"):
+        continued_runs(tmp_path)
     scratch = cli(*args, "--force", "--set", "train.iterations=4", "train.checkpoint_every=1")
     assert scratch.returncode == 0 and "continuing" not in scratch.stderr
     assert sorted(p.name for p in (short / "checkpoints").iterdir()) == ["model_1.pt", "model_2.pt"]

@@ -1,0 +1,72 @@
+"""A training's hours, from its log, into a result file.
+
+    python bench/training_hours.py <train artifact folder> [--into bench/results/dance_window_restart.json]
+
+The log of a train artifact carries every iteration of every run the training continued (grown,
+resumed, restored from a saved checkpoint, or a GPU lease's probe left on its machine), so its
+hours are counted from the log, never from the runs still in the store. Prints them; with
+`--into`, replaces the `wall_h*` fields of a result file an earlier commit's bench wrote, and
+records which commit counted them (`hours_commit`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+from pathlib import Path
+from typing import Any
+
+from provenance import head_commit
+
+from rd_pipeline.api.workspace import training_log, training_seconds, training_seconds_per_run
+from rd_pipeline.errors import PipelineError
+
+
+def training_hours(train: Path) -> dict[str, Any]:
+    """The hours as they passed (with any time the training was stopped or shared the machine), at
+    the median iteration's pace (the machine to itself), and per run in the store."""
+    per_run = training_seconds_per_run(train)
+    rows = training_log(train)
+    median_s = statistics.median(row["seconds"] for row in rows)
+    return {
+        "wall_h": round(training_seconds(train) / 3600, 3),
+        "wall_h_at_median_iteration": round(len(rows) * median_s / 3600, 3),
+        "wall_h_per_run": {key: round(seconds / 3600, 3) for key, seconds in per_run.items()},
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("train", type=Path, help="a train artifact's folder")
+    parser.add_argument("--into", type=Path, default=None, help="a result file whose wall_h* fields to replace")
+    args = parser.parse_args()
+    try:
+        hours = training_hours(args.train)
+        if args.into is not None:
+            _replace(args.into, hours)
+    except (PipelineError, OSError, ValueError) as exc:
+        sys.exit(f"error: {exc}")
+    print(json.dumps(hours, indent=2))
+
+
+def _replace(result_path: Path, hours: dict[str, Any]) -> None:
+    try:
+        result = json.loads(result_path.read_text())
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{result_path}: not a JSON result file ({exc})") from None
+    replaced: dict[str, Any] = {}
+    for name, value in result.items():
+        # the new hours take the place of the first old one, so the file reads as before
+        if name.startswith("wall_h"):
+            replaced.update(hours)
+        else:
+            replaced[name] = value
+    replaced.update(hours)
+    replaced["hours_commit"] = head_commit()
+    result_path.write_text(json.dumps(replaced, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()
