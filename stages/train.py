@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from rich.markup import escape
@@ -14,68 +15,89 @@ from rd_pipeline.rl.training_config import TrainConfig, clip_frames
 from rd_pipeline.robots.assets import model_files
 
 if TYPE_CHECKING:
-    from rd_pipeline.rl.runner import ShorterRun
+    from rd_pipeline.rl.runner import ShorterRun, TrainingJob, TrainingOutcome
 
 CURVE_FILE = "learning_curve.png"
 PROFILE_FILE = "sampler_profile.png"
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
-    from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
-    from rd_pipeline.rl.launch import train_in_processes
-    from rd_pipeline.rl.runner import (
-        Segments,
-        TrainingJob,
-        clip_segments,
-        continued_from,
-        run_job,
-        starting_checkpoint,
-        training_metrics,
-    )
-    from rd_pipeline.rl.trainer import plot_learning_curve
-    from rd_pipeline.rl.training_log import best_scored, checkpoint_iteration, read_training_log
-    from rd_pipeline.robots import load_robot
-    from rd_pipeline.sampling.plots import plot_sampler_profile
-    from rd_pipeline.sampling.prior import PRIOR_FILE
+    from rd_pipeline.rl.runner import continued_from, training_metrics
+    from rd_pipeline.rl.training_log import best_scored
 
     config: TrainConfig = ctx.params
-    robot = load_robot(ctx.robot_name)
-    reference = ReferenceMotion.load(ctx.upstream["reference"].path / REFERENCE_FILE)
-    with open_npz(ctx.upstream["sampling_prior"].path / PRIOR_FILE) as prior:
-        segments = Segments(prior["starts"], prior["lengths"], prior["weights"])
-    warn = lambda message: ctx.console.print(f"[yellow]warning:[/] {escape(message)}", highlight=False)
-    start, end = clip_frames(config.clip, reference.fps, reference.n_frames, warn)
     # Checkpoints and the log live in the work folder, which survives an interruption.
     work = ctx.work_dir or ctx.out_dir
-    shorter = _longest_shorter_run(ctx.shorter, config.iterations) if ctx.resume else None
-    say = lambda line: ctx.console.print(line, markup=False, highlight=False)
-    checkpoint = starting_checkpoint(work, ctx.restart, shorter, say)
-    job = TrainingJob(
-        robot, reference.frames(start, end), clip_segments(segments, start, end), config, work, checkpoint
-    )
-    first = checkpoint_iteration(checkpoint) if checkpoint else 0
-    with ctx.progress(config.iterations, f"PPO {ctx.robot}", done=first) as advance:
-        status = lambda row: advance(f"reward {row['reward']:.2f}  episode {row['episode_length_s'] or 0:.2f} s")
-        if config.ranks > 1:
-            outcome = train_in_processes(job, status)
-        else:
-            outcome = run_job(job, status)
-    rows = read_training_log(work)
-    if work != ctx.out_dir:
-        for item in work.iterdir():
-            shutil.move(str(item), ctx.out_dir / item.name)
-        work.rmdir()
-    plot_learning_curve(rows, ctx.out_dir / CURVE_FILE)
-    uniform = 1 / len(outcome.failure_rate)
-    plot_sampler_profile(outcome.failure_rate, outcome.probabilities, uniform, ctx.out_dir / PROFILE_FILE)
+    job, clip = _job(ctx, config, work)
+    outcome = _train(ctx, job)
+    rows = _into_artifact(work, ctx.out_dir)
+    _plot(rows, outcome, ctx.out_dir)
     # The last iteration is always a scored checkpoint, so there is a best one.
     best = best_scored(rows)
     assert best is not None
     return {
         **training_metrics(rows, outcome, config, best),
         "continued_from": continued_from(ctx.out_dir),
-        "clip_frames": [start, end],
+        "clip_frames": list(clip),
     }
+
+
+def _job(ctx: StageContext, config: TrainConfig, work: Path) -> tuple[TrainingJob, tuple[int, int]]:
+    """The training job for the clip of the reference, starting from the checkpoint to continue
+    (an interrupted run's in `work`, or with `--resume` the longest finished shorter run's)."""
+    from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+    from rd_pipeline.rl.runner import Segments, TrainingJob, clip_segments, starting_checkpoint
+    from rd_pipeline.robots import load_robot
+    from rd_pipeline.sampling.prior import PRIOR_FILE
+
+    reference = ReferenceMotion.load(ctx.upstream["reference"].path / REFERENCE_FILE)
+    with open_npz(ctx.upstream["sampling_prior"].path / PRIOR_FILE) as prior:
+        segments = Segments(prior["starts"], prior["lengths"], prior["weights"])
+    warn = lambda message: ctx.console.print(f"[yellow]warning:[/] {escape(message)}", highlight=False)
+    start, end = clip_frames(config.clip, reference.fps, reference.n_frames, warn)
+    shorter = _longest_shorter_run(ctx.shorter, config.iterations) if ctx.resume else None
+    say = lambda line: ctx.console.print(line, markup=False, highlight=False)
+    checkpoint = starting_checkpoint(work, ctx.restart, shorter, say)
+    robot = load_robot(ctx.robot_name)
+    job = TrainingJob(
+        robot, reference.frames(start, end), clip_segments(segments, start, end), config, work, checkpoint
+    )
+    return job, (start, end)
+
+
+def _train(ctx: StageContext, job: TrainingJob) -> TrainingOutcome:
+    """Run the job in this process or as `ranks` processes, with a progress bar."""
+    from rd_pipeline.rl.launch import train_in_processes
+    from rd_pipeline.rl.runner import run_job
+    from rd_pipeline.rl.training_log import checkpoint_iteration
+
+    first = checkpoint_iteration(job.checkpoint) if job.checkpoint else 0
+    with ctx.progress(job.config.iterations, f"PPO {ctx.robot}", done=first) as advance:
+        status = lambda row: advance(f"reward {row['reward']:.2f}  episode {row['episode_length_s'] or 0:.2f} s")
+        if job.config.ranks > 1:
+            return train_in_processes(job, status)
+        return run_job(job, status)
+
+
+def _into_artifact(work: Path, out_dir: Path) -> list[dict]:
+    """Move the work folder's checkpoints and log into the artifact; the log's rows."""
+    from rd_pipeline.rl.training_log import read_training_log
+
+    rows = read_training_log(work)
+    if work != out_dir:
+        for item in work.iterdir():
+            shutil.move(str(item), out_dir / item.name)
+        work.rmdir()
+    return rows
+
+
+def _plot(rows: list[dict], outcome: TrainingOutcome, out_dir: Path) -> None:
+    from rd_pipeline.rl.trainer import plot_learning_curve
+    from rd_pipeline.sampling.plots import plot_sampler_profile
+
+    plot_learning_curve(rows, out_dir / CURVE_FILE)
+    uniform = 1 / len(outcome.failure_rate)
+    plot_sampler_profile(outcome.failure_rate, outcome.probabilities, uniform, out_dir / PROFILE_FILE)
 
 
 def _longest_shorter_run(runs: tuple[ArtifactRef, ...], iterations: int) -> ShorterRun | None:
