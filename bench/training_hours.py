@@ -20,20 +20,21 @@ from typing import Any
 
 from provenance import head_commit
 
-from rd_pipeline.api.workspace import training_log, training_seconds, training_seconds_per_run
+from rd_pipeline.api.workspace import training_log, training_seconds_per_run
 from rd_pipeline.errors import PipelineError
 
 
 def training_hours(train: Path) -> dict[str, Any]:
-    """The hours as they passed (with any time the training was stopped or shared the machine), at
-    the median iteration's pace (the machine to itself), and per run in the store."""
+    """The hours as they passed (with any pause or sharing of the machine within the iterations),
+    at the median iteration's pace (the machine to itself), and per run in the store."""
     per_run = training_seconds_per_run(train)
-    rows = training_log(train)
-    median_s = statistics.median(row["seconds"] for row in rows)
+    seconds = [row["seconds"] for row in training_log(train)]
+    if not seconds:
+        raise ValueError(f"{train}: its training log has no iterations")
     return {
-        "wall_h": round(training_seconds(train) / 3600, 3),
-        "wall_h_at_median_iteration": round(len(rows) * median_s / 3600, 3),
-        "wall_h_per_run": {key: round(seconds / 3600, 3) for key, seconds in per_run.items()},
+        "wall_h": round(sum(seconds) / 3600, 3),
+        "wall_h_at_median_iteration": round(len(seconds) * statistics.median(seconds) / 3600, 3),
+        "wall_h_per_run": {key: round(run_seconds / 3600, 3) for key, run_seconds in per_run.items()},
     }
 
 
@@ -48,6 +49,8 @@ def main() -> None:
             _replace(args.into, hours)
     except (PipelineError, OSError, ValueError) as exc:
         sys.exit(f"error: {exc}")
+    except KeyError as exc:
+        sys.exit(f"error: {args.train}: a manifest or log row lacks the field {exc}")
     print(json.dumps(hours, indent=2))
 
 
@@ -56,6 +59,8 @@ def _replace(result_path: Path, hours: dict[str, Any]) -> None:
         result = json.loads(result_path.read_text())
     except json.JSONDecodeError as exc:
         raise ValueError(f"{result_path}: not a JSON result file ({exc})") from None
+    if not isinstance(result, dict):
+        raise ValueError(f"{result_path}: not a JSON result file (a {type(result).__name__}, not an object)")
     replaced: dict[str, Any] = {}
     for name, value in result.items():
         # the new hours take the place of the first old one, so the file reads as before

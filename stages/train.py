@@ -50,6 +50,7 @@ def _job(ctx: StageContext, config: TrainConfig, work: Path) -> tuple[TrainingJo
     from rd_pipeline.robots import load_robot
     from rd_pipeline.sampling.prior import PRIOR_FILE
 
+    robot = load_robot(ctx.robot_name)
     reference = ReferenceMotion.load(ctx.upstream["reference"].path / REFERENCE_FILE)
     with open_npz(ctx.upstream["sampling_prior"].path / PRIOR_FILE) as prior:
         segments = Segments(prior["starts"], prior["lengths"], prior["weights"])
@@ -58,7 +59,6 @@ def _job(ctx: StageContext, config: TrainConfig, work: Path) -> tuple[TrainingJo
     shorter = _longest_shorter_run(ctx.shorter, config.iterations) if ctx.resume else None
     say = lambda line: ctx.console.print(line, markup=False, highlight=False)
     checkpoint = starting_checkpoint(work, ctx.restart, shorter, say)
-    robot = load_robot(ctx.robot_name)
     job = TrainingJob(
         robot, reference.frames(start, end), clip_segments(segments, start, end), config, work, checkpoint
     )
@@ -92,6 +92,7 @@ def _into_artifact(work: Path, out_dir: Path) -> list[dict]:
 
 
 def _plot(rows: list[dict], outcome: TrainingOutcome, out_dir: Path) -> None:
+    """The learning curve and the sampler's failure profile, beside the checkpoints."""
     from rd_pipeline.rl.trainer import plot_learning_curve
     from rd_pipeline.sampling.plots import plot_sampler_profile
 

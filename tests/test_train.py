@@ -253,3 +253,10 @@ def test_a_longer_run_with_resume_continues_the_shorter_one_bit_for_bit(artifact
     for name, value in a["algorithm"]["actor_state_dict"].items():
         assert torch.equal(value, b["algorithm"]["actor_state_dict"][name]), name
     assert a["ranks"][0]["env"]["rng"] == b["ranks"][0]["env"]["rng"]
+
+
+def test_a_torn_training_log_is_refused_naming_its_file_and_line(tmp_path: Path) -> None:
+    """A log cut mid-row (a machine lost while writing) is one line of error, not a traceback."""
+    (tmp_path / "training_log.jsonl").write_text('{"iteration": 1, "seconds": 0.8}\n{"iteration": 2, "seco')
+    with pytest.raises(PipelineError, match=f"{tmp_path / 'training_log.jsonl'}: line 2 is not a JSON row"):
+        read_training_log(tmp_path)

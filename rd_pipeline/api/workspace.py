@@ -225,8 +225,8 @@ def training_checkpoints(train: Path) -> dict[int, Path]:
 
 
 def continued_runs(train: Path) -> list[Path]:
-    """A train artifact and the runs it continued that are still beside it in the store, oldest
-    first: a grown training continues the shorter run before it."""
+    """A train artifact and the runs it continued, oldest first, back to the first one missing from
+    the store: a grown training continues the shorter run before it."""
     manifest_path = train / MANIFEST
     if not manifest_path.is_file():
         raise PipelineError(f"{train}: no {MANIFEST}; not a finished artifact")
@@ -246,10 +246,10 @@ def training_seconds(train: Path) -> float:
 
 def training_seconds_per_run(train: Path) -> dict[str, float]:
     """The seconds of the iterations each run behind `train` added, by key, oldest first. The
-    oldest run still in the store also carries the iterations of the runs gone before it."""
+    oldest run `continued_runs` finds also carries the iterations of the runs before it."""
     runs = continued_runs(train)
     rows = read_training_log(train)
-    per_run = {}
+    per_run: dict[str, float] = {}
     done = 0
     for run in runs:
         manifest = json.loads((run / MANIFEST).read_text())

@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from rd_pipeline.errors import PipelineError
+
 CHECKPOINT_DIR = "checkpoints"
 LOG_FILE = "training_log.jsonl"
 
@@ -28,7 +30,14 @@ def checkpoints_by_iteration(folder: Path) -> dict[int, Path]:
 
 def read_training_log(folder: Path) -> list[dict]:
     """The rows of a training folder's log, one per iteration, oldest first."""
-    return [json.loads(line) for line in (folder / LOG_FILE).read_text().splitlines()]
+    path = folder / LOG_FILE
+    rows = []
+    for number, line in enumerate(path.read_text().splitlines(), start=1):
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            raise PipelineError(f"{path}: line {number} is not a JSON row") from None
+    return rows
 
 
 def best_scored(rows: list[dict]) -> dict | None:
