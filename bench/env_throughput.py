@@ -32,6 +32,7 @@ import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -39,6 +40,7 @@ import torch
 
 from rd_pipeline import paths
 from rd_pipeline.motion.contact import ContactThresholds
+from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig
@@ -49,7 +51,7 @@ from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
 from rd_pipeline.rl.runner import Segments, TrainingJob
 from rd_pipeline.rl.training_config import TrainConfig
-from rd_pipeline.robots import load_robot
+from rd_pipeline.robots import Robot, load_robot
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
 from rd_pipeline.sampling.segments import segment_bounds
 
@@ -69,6 +71,24 @@ PPO = {"fast_bf16": PpoConfig(mixed_precision=True)}
 
 
 def main() -> None:
+    args = _parser().parse_args()
+    robot = load_robot(args.robot)
+    reference = import_retargeted_csv(
+        paths.csv_path(args.robot, args.motion), robot, 30.0, 50.0, "cubic", ContactThresholds()
+    ).reference
+    envs, memory_mb = _environments(args, robot, reference)
+    rates = _measure(args, envs, robot, reference)
+    result = _result(args, envs, rates, memory_mb)
+    for env in envs.values():
+        env.close()
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(result, indent=2) + "\n")
+    print(json.dumps(result, indent=2))
+    if "speedup" in result:
+        print(f"speedup={result['speedup']:.2f} physics_ratio={result['physics_ratio']:.3f}")
+
+
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robot", default="g1")
     parser.add_argument("--motion", default="dance1_subject2")
@@ -79,11 +99,13 @@ def main() -> None:
     parser.add_argument("--ranks", type=int, default=2, help="processes of the ranks path (0: skip it)")
     parser.add_argument("--device", default="cpu", help="torch device for the warp path: cpu or cuda")
     parser.add_argument("--out", type=Path, default=Path("bench/results/env_throughput.json"))
-    args = parser.parse_args()
-    robot = load_robot(args.robot)
-    reference = import_retargeted_csv(
-        paths.csv_path(args.robot, args.motion), robot, 30.0, 50.0, "cubic", ContactThresholds()
-    ).reference
+    return parser
+
+
+def _environments(
+    args: argparse.Namespace, robot: Robot, reference: ReferenceMotion
+) -> tuple[dict[str, TrackingEnv], dict[str, float]]:
+    """Each path's environments, and the resident memory each environment added (MB)."""
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
     envs = {}
     memory_mb = {}
@@ -94,7 +116,14 @@ def main() -> None:
         config = EnvConfig(num_envs=args.envs, threads=args.threads, device=device, **PATHS[name])
         envs[name] = TrackingEnv(robot, reference, sampler, starts, lengths, config, seed=0)
         memory_mb[name] = (_rss_mb() - before) / args.envs
-    rates = {name: {"env": [], "raw": [], "ppo": []} for name in envs}
+    return envs, memory_mb
+
+
+def _measure(
+    args: argparse.Namespace, envs: dict[str, TrackingEnv], robot: Robot, reference: ReferenceMotion
+) -> dict[str, dict[str, list[float]]]:
+    """Every path's rates, block by block in turn so that all see the same machine."""
+    rates: dict[str, dict[str, list[float]]] = {name: {"env": [], "raw": [], "ppo": []} for name in envs}
     ppos = {
         name: build_ppo(
             env.get_observations(),
@@ -117,7 +146,16 @@ def main() -> None:
             rates[name]["ppo"].append(_ppo_rate(env, ppos[name]))
         if ranked:
             rates["fast_ranks"]["ppo"].append(_ranks_rate(robot, reference, args))
-    result = {
+    return rates
+
+
+def _result(
+    args: argparse.Namespace,
+    envs: dict[str, TrackingEnv],
+    rates: dict[str, dict[str, list[float]]],
+    memory_mb: dict[str, float],
+) -> dict[str, Any]:
+    result: dict[str, Any] = {
         "robot": args.robot,
         "motion": args.motion,
         "envs": args.envs,
@@ -125,7 +163,7 @@ def main() -> None:
         "repeats": args.repeats,
         "paths": {},
     }
-    for name, env in envs.items():
+    for name in envs:
         measured = rates[name]
         result["paths"][name] = {
             **PATHS[name],
@@ -136,34 +174,32 @@ def main() -> None:
             "ppo_samples_per_s_including_update": round(statistics.median(measured["ppo"]), 1),
             "samples": {key: [round(v) for v in values] for key, values in measured.items()},
         }
-        env.close()
-    if ranked:
-        measured = rates["fast_ranks"]["ppo"]
+    if "fast_ranks" in rates:
+        measured_ranks = rates["fast_ranks"]["ppo"]
         result["paths"]["fast_ranks"] = {
             **PATHS["fast"],
             "ranks": args.ranks,
             "envs_per_rank": args.envs // args.ranks,
             "threads_per_rank": max(1, args.threads // args.ranks),
-            "ppo_samples_per_s_including_update": round(statistics.median(measured), 1),
-            "samples": {"ppo": [round(v) for v in measured]},
+            "ppo_samples_per_s_including_update": round(statistics.median(measured_ranks), 1),
+            "samples": {"ppo": [round(v) for v in measured_ranks]},
         }
-    line = ""
-    if "old" in rates and "fast" in envs:
-        old = result["paths"]["old"]["ppo_samples_per_s_including_update"]
-        result["speedup_by_path"] = {
-            name: round(path["ppo_samples_per_s_including_update"] / old, 2) for name, path in result["paths"].items()
-        }
-        physics = result["paths"]["fast"]
-        speedup = physics["ppo_samples_per_s_including_update"] / old
-        ratio = physics["env_physics_steps_per_s"] / physics["raw_batched_steps_per_s"]
-        result["speedup"] = round(speedup, 2)
-        result["physics_ratio"] = round(ratio, 3)
-        line = f"speedup={speedup:.2f} physics_ratio={ratio:.3f}"
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=2) + "\n")
-    print(json.dumps(result, indent=2))
-    if line:
-        print(line)
+    if "old" in envs and "fast" in envs:
+        result.update(_speedups(result["paths"]))
+    return result
+
+
+def _speedups(paths_result: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Every path's PPO samples/s against the old path's; the fast path's physics against its raw stepping."""
+    old = paths_result["old"]["ppo_samples_per_s_including_update"]
+    fast = paths_result["fast"]
+    return {
+        "speedup_by_path": {
+            name: round(path["ppo_samples_per_s_including_update"] / old, 2) for name, path in paths_result.items()
+        },
+        "speedup": round(fast["ppo_samples_per_s_including_update"] / old, 2),
+        "physics_ratio": round(fast["env_physics_steps_per_s"] / fast["raw_batched_steps_per_s"], 3),
+    }
 
 
 def _env_rate(env: TrackingEnv, steps: int = 50) -> tuple[float, list]:
@@ -280,7 +316,7 @@ def _ppo_rate(env: TrackingEnv, ppo, iterations: int = 2) -> float:
     return iterations * ppo.storage.num_transitions_per_env * env.num_envs / (time.perf_counter() - began)
 
 
-def _ranks_rate(robot, reference, args: argparse.Namespace, iterations: int = 4) -> float:
+def _ranks_rate(robot: Robot, reference: ReferenceMotion, args: argparse.Namespace, iterations: int = 4) -> float:
     """PPO samples/s of a real data-parallel training of the fast path: `args.ranks` processes
     sharing `args.envs` environments; the median of its logged iterations after the first."""
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
