@@ -19,6 +19,7 @@ import json
 import shutil
 import sys
 from pathlib import Path
+from typing import Any
 
 from provenance import head_commit
 
@@ -36,6 +37,21 @@ ROBOT = "g1"
 
 
 def main() -> None:
+    args = _parser().parse_args()
+    sets = (f"train.clip={args.clip}", f"train.iterations={args.iterations}", *args.set)
+    try:
+        plan = workspace.plan(ROBOT, args.motion, args.profile, overrides=sets, seed=args.seed)
+        workspace.run(plan, resume=True)
+        result = _result(plan, args)
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
+        _copy_figures(plan, args.out)
+    except (PipelineError, OSError) as exc:
+        sys.exit(f"error: {exc}")
+    print(json.dumps(result, indent=2))
+
+
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--clip", default="0:30")
     parser.add_argument("--iterations", type=int, default=2800)
@@ -45,16 +61,13 @@ def main() -> None:
     parser.add_argument("--set", nargs="*", default=[], help="further overrides")
     parser.add_argument("--out", type=Path, default=Path("bench/results/learning_30s"))
     parser.add_argument("--commit", default=None, help="the commit the code ran (default: git's HEAD here)")
-    args = parser.parse_args()
-    sets = (f"train.clip={args.clip}", f"train.iterations={args.iterations}", *args.set)
-    try:
-        plan = workspace.plan(ROBOT, args.motion, args.profile, overrides=sets, seed=args.seed)
-        workspace.run(plan, resume=True)
-    except PipelineError as exc:
-        sys.exit(f"error: {exc}")
-    train = workspace.artifact(plan, "train")
-    export = workspace.artifact(plan, "export")
-    validate = workspace.artifact(plan, "validate")
+    return parser
+
+
+def _result(plan: workspace.Plan, args: argparse.Namespace) -> dict[str, Any]:
+    train = workspace.required_artifact(plan, "train")
+    export = workspace.required_artifact(plan, "export")
+    validate = workspace.required_artifact(plan, "validate")
     manifest = json.loads((train / MANIFEST).read_text())
     trained = manifest["metrics"]
     validation = ValidationReport.load(validate)
@@ -65,11 +78,12 @@ def main() -> None:
     per_start = {name: report["nominal"][name]["per_start"] for name in ("policy", "zero_action")}
     policy = report["nominal"]["policy"]
     params = manifest["params"]
-    result = {
+    per_run = training_seconds_per_run(train)
+    return {
         "robot": ROBOT,
         "motion": args.motion,
         "clip": args.clip,
-        "clip_s": report["reference"]["duration_s"],
+        "clip_s": clip["duration_s"],
         "start_zero_s": validation.start_zero_survival_s,
         "completion_pct": validation.completion_pct,
         "mean_survival_s": validation.mean_survival_s,
@@ -80,7 +94,7 @@ def main() -> None:
         "training_model_start_zero_s": trained["best_start_zero_s"],
         "final_checkpoint_training_model_start_zero_s": trained["final_start_zero_s"],
         "wall_min": round(training_seconds(train) / 60, 2),
-        "wall_min_per_run": {key: round(seconds / 60, 2) for key, seconds in training_seconds_per_run(train).items()},
+        "wall_min_per_run": {key: round(seconds / 60, 2) for key, seconds in per_run.items()},
         "samples": trained["samples"],
         "commit": args.commit or head_commit(),
         "physics_dt": params["env"]["physics_dt"],
@@ -100,16 +114,20 @@ def main() -> None:
         "fixed_grid_zero_action_survival_s": per_start["zero_action"]["survival_s"],
         "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(reference),
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
+
+
+def _copy_figures(plan: workspace.Plan, out: Path) -> None:
+    """The learning curve, the sampler profile, the survival per start and the validation report,
+    beside the result file."""
+    train = workspace.required_artifact(plan, "train")
+    validate = workspace.required_artifact(plan, "validate")
     for source, suffix in (
         (train / CURVE_FILE, "_curve.png"),
         (train / PROFILE_FILE, "_sampler_profile.png"),
         (validate / REPORT_MD, "_validation.md"),
         (validate / SURVIVAL_PLOT, "_survival_per_start.png"),
     ):
-        shutil.copyfile(source, args.out.parent / f"{args.out.name}{suffix}")
-    print(json.dumps(result, indent=2))
+        shutil.copyfile(source, out.parent / f"{out.name}{suffix}")
 
 
 if __name__ == "__main__":
