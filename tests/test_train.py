@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from conftest import cli, h1_2_dance_env
+from conftest import PROJECT, cli, h1_2_dance_env
 
 from rd_pipeline.api.workspace import continued_runs, training_seconds, training_seconds_per_run
 from rd_pipeline.artifacts.stage import build_params
@@ -238,6 +240,7 @@ def test_a_longer_run_with_resume_continues_the_shorter_one_bit_for_bit(artifact
     assert training_seconds_per_run(gone) == {grown.name: pytest.approx(training_seconds(grown))}
     with pytest.raises(PipelineError, match="no manifest.json; not a finished artifact"):
         continued_runs(tmp_path)
+    _check_training_hours_script(grown, per_run, tmp_path)
     scratch = cli(*args, "--force", "--set", "train.iterations=4", "train.checkpoint_every=1")
     assert scratch.returncode == 0 and "continuing" not in scratch.stderr
     assert sorted(p.name for p in (short / "checkpoints").iterdir()) == ["model_1.pt", "model_2.pt"]
@@ -253,6 +256,36 @@ def test_a_longer_run_with_resume_continues_the_shorter_one_bit_for_bit(artifact
     for name, value in a["algorithm"]["actor_state_dict"].items():
         assert torch.equal(value, b["algorithm"]["actor_state_dict"][name]), name
     assert a["ranks"][0]["env"]["rng"] == b["ranks"][0]["env"]["rng"]
+
+
+def _check_training_hours_script(grown: Path, per_run: dict[str, float], tmp_path: Path) -> None:
+    """`bench/training_hours.py --into` puts the log's hours into a result file an older commit's
+    bench wrote, where its `wall_h` stood, and says which commit counted them."""
+    script = str(PROJECT / "bench" / "training_hours.py")
+    result = tmp_path / "result.json"
+    result.write_text(json.dumps({"samples": 4, "wall_h": 9.0, "commit": "d23062d"}))
+    hours = subprocess.run([sys.executable, script, str(grown), "--into", str(result)], capture_output=True, text=True)
+    assert hours.returncode == 0, hours.stderr
+    written = json.loads(result.read_text())
+    head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=PROJECT)
+    assert list(written) == [
+        "samples",
+        "wall_h",
+        "wall_h_at_median_iteration",
+        "wall_h_per_run",
+        "commit",
+        "hours_commit",
+    ]
+    assert written["wall_h"] == round(training_seconds(grown) / 3600, 3)
+    assert written["wall_h_per_run"] == {key: round(seconds / 3600, 3) for key, seconds in per_run.items()}
+    assert written["commit"] == "d23062d" and written["hours_commit"] == head.stdout.strip()
+    result.write_text("[1, 2]")
+    refused = subprocess.run(
+        [sys.executable, script, str(grown), "--into", str(result)], capture_output=True, text=True
+    )
+    assert refused.returncode == 1
+    assert refused.stderr == f"error: {result}: not a JSON result file (a list, not an object)\n"
+    assert result.read_text() == "[1, 2]"
 
 
 def test_a_torn_training_log_is_refused_naming_its_file_and_line(tmp_path: Path) -> None:
