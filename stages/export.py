@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from rd_pipeline.artifacts.stage import Stage, StageContext, typed_config
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.rl.training_config import TrainConfig
+from rd_pipeline.rl.training_log import ScoreFirst, best_scored, read_training_log
 from rd_pipeline.robots.assets import model_files
 
 REFERENCE_STAGES = ("retarget", "import")
@@ -17,8 +20,13 @@ class ExportConfig:
     """Which checkpoint goes to the robot."""
 
     checkpoint: int = 0
-    """Training iteration of the checkpoint to export (0: the one `train` scored best: the longest
-    start-zero survival on nominal physics, then the highest completion, then the latest)."""
+    """Training iteration of the checkpoint to export (0: the one `train` scored best, as `best_by`
+    orders the scores)."""
+    best_by: ScoreFirst = "start_zero"
+    """Which score of `train`'s checkpoint scoring comes first: `start_zero` (survival from the
+    clip's first frame on nominal physics) or `completion` (the mean share of the clip survived
+    from its scoring starts, which favours a policy that recovers into the middle of the clip);
+    ties go to the other score, then to the latest checkpoint."""
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
@@ -34,12 +42,19 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         config=typed_config(TrainConfig, manifest["params"], "train"),
         observation_size=metrics["observation_size"],
         num_actions=metrics["num_actions"],
-        best_checkpoint=metrics["best_checkpoint"],
         clip_frames=tuple(metrics["clip_frames"]),
         reference_stage=reference_stage,
         reference_key=manifest["upstream"][reference_stage],
     )
-    return export_policy(trained, load_robot(ctx.robot_name), ctx.params.checkpoint, ctx.out_dir)
+    checkpoint = ctx.params.checkpoint or _best(train.path, ctx.params.best_by)
+    return export_policy(trained, load_robot(ctx.robot_name), checkpoint, ctx.out_dir)
+
+
+def _best(train: Path, best_by: ScoreFirst) -> int:
+    best = best_scored(read_training_log(train), best_by)
+    if best is None:
+        raise PipelineError(f"{train}: no checkpoint of this training was scored")
+    return best["iteration"]
 
 
 STAGE = Stage(

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from conftest import h1_2_dance_env
+from conftest import PROJECT, h1_2_dance_env
 
 from rd_pipeline.rl.actions import ActionConfig
 from rd_pipeline.rl.env_config import EnvConfig
@@ -72,3 +72,29 @@ def test_scoring_at_checkpoints_leaves_training_bit_for_bit_and_scores_the_saved
     ppo.load(saved["algorithm"], None, strict=True)
     rescored = checkpoint_scorer(h1_2_dance_env(nominal(CONFIG, 4)), _mean_action(ppo))()
     assert rescored == {key: rows[1][key] for key in ("start_zero_s", "completion")}
+
+
+def test_best_by_completion_picks_the_checkpoint_that_recovers_into_the_clip(tmp_path: Path) -> None:
+    """On the committed log of the 132 M-sample G1 dance-window run, start-zero first picks
+    checkpoint 35700 (9.98 s, completion 0.535); completion first picks 42400 (9.78 s, 0.743), the
+    one whose fixed-grid validation lasts longer from the window's middle."""
+    import gzip
+    import shutil
+
+    with gzip.open(PROJECT / "bench" / "results" / "dance_window_state" / "training_log.jsonl.gz") as packed:
+        with open(tmp_path / "training_log.jsonl", "wb") as log:
+            shutil.copyfileobj(packed, log)
+    rows = read_training_log(tmp_path)
+    by_start_zero = best_scored(rows)
+    by_completion = best_scored(rows, "completion")
+    assert by_start_zero is not None and by_completion is not None
+    assert (by_start_zero["iteration"], by_start_zero["start_zero_s"], by_start_zero["completion"]) == (
+        35700,
+        9.98,
+        0.5347,
+    )
+    assert (by_completion["iteration"], by_completion["start_zero_s"], by_completion["completion"]) == (
+        42400,
+        9.78,
+        0.7428,
+    )

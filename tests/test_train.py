@@ -123,7 +123,8 @@ def test_a_reward_weight_and_a_termination_threshold_set_on_the_command_line_cha
 )
 @pytest.mark.slow
 def test_smoke_profile_runs_the_dag_to_export(robot: str, motion: str, artifacts: Path) -> None:
-    result = cli("run", "--robot", robot, "--motion", motion, "--until", "export", "--profile", "smoke")
+    args = ("run", "--robot", robot, "--motion", motion, "--until", "export", "--profile", "smoke")
+    result = cli(*args)
     assert result.returncode == 0, result.stderr
     (folder,) = (artifacts / "train" / robot / motion).iterdir()
     assert (folder / "learning_curve.png").is_file() and (folder / "checkpoints" / "model_2.pt").is_file()
@@ -142,6 +143,12 @@ def test_smoke_profile_runs_the_dag_to_export(robot: str, motion: str, artifacts
         json.loads((exported / "manifest.json").read_text())["metrics"]["checkpoint_iteration"]
         == metrics["best_checkpoint"]
     )
+    # export.best_by=completion orders the same scores completion first
+    by_completion = cli(*args, "--set", "export.best_by=completion")
+    assert by_completion.returncode == 0, by_completion.stderr
+    (other,) = [p for p in (artifacts / "export" / robot / motion).iterdir() if p != exported]
+    completion_first = max(scores, key=lambda it: (scores[it][1], scores[it][0], it))
+    assert json.loads((other / "manifest.json").read_text())["metrics"]["checkpoint_iteration"] == completion_first
     residual = [joint for joint, kind in zip(action["outputs"], action["semantics"]) if kind == "residual"]
     assert sorted(residual) == sorted(
         f"{side}_{joint}_joint" for side in ("left", "right") for joint in ("hip_pitch", "knee")

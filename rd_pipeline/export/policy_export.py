@@ -34,8 +34,6 @@ class TrainedPolicy:
     """Actor input size."""
     num_actions: int
     """Actor output size."""
-    best_checkpoint: int
-    """The checkpoint training scored best."""
     clip_frames: tuple[int, int]
     """[start, end) reference frames it trained on."""
     reference_stage: str
@@ -44,13 +42,12 @@ class TrainedPolicy:
     """That reference artifact's key."""
 
 
-def export_policy(trained: TrainedPolicy, robot: Robot, checkpoint: int, out_dir: Path) -> dict[str, Any]:
-    """Write `policy.pt`, `policy.json` and `policy.onnx` of `checkpoint` (0: the best-scored one)
-    into `out_dir`; returns the export's metrics."""
+def export_policy(trained: TrainedPolicy, robot: Robot, iteration: int, out_dir: Path) -> dict[str, Any]:
+    """Write `policy.pt`, `policy.json` and `policy.onnx` of the checkpoint saved after `iteration`
+    iterations into `out_dir`; returns the export's metrics."""
     checkpoints = checkpoints_by_iteration(trained.folder)
     if not checkpoints:
         raise PipelineError(f"{trained.folder}: the training artifact has no checkpoints")
-    iteration = checkpoint or trained.best_checkpoint
     if iteration not in checkpoints:
         raise PipelineError(f"export.checkpoint {iteration}: no such checkpoint (have {sorted(checkpoints)})")
     hidden = list(trained.config.ppo.hidden_dims)

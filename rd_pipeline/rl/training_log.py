@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Literal
 
 from rd_pipeline.errors import PipelineError
 
 CHECKPOINT_DIR = "checkpoints"
 LOG_FILE = "training_log.jsonl"
+
+ScoreFirst = Literal["start_zero", "completion"]
 
 
 def checkpoint_path(folder: Path, iteration: int) -> Path:
@@ -40,8 +43,11 @@ def read_training_log(folder: Path) -> list[dict]:
     return rows
 
 
-def best_scored(rows: list[dict]) -> dict | None:
+def best_scored(rows: list[dict], first: ScoreFirst = "start_zero") -> dict | None:
     """The log row of the best-scored checkpoint: the longest start-zero survival, then the highest
-    completion, then the latest; None when no row has a score."""
+    completion (or, with `first="completion"`, the other way round), then the latest; None when
+    no row has a score."""
     scored = [row for row in rows if "start_zero_s" in row]
+    if first == "completion":
+        return max(scored, key=lambda row: (row["completion"], row["start_zero_s"], row["iteration"]), default=None)
     return max(scored, key=lambda row: (row["start_zero_s"], row["completion"], row["iteration"]), default=None)
