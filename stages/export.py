@@ -9,7 +9,7 @@ from typing import Any
 from rd_pipeline.artifacts.stage import Stage, StageContext, typed_config
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.rl.training_config import TrainConfig
-from rd_pipeline.rl.training_log import ScoreFirst, best_scored, read_training_log
+from rd_pipeline.rl.training_log import ScoreFirst, best_scored, checkpoints_by_iteration, read_training_log
 from rd_pipeline.robots.assets import model_files
 
 REFERENCE_STAGES = ("retarget", "import")
@@ -24,9 +24,11 @@ class ExportConfig:
     orders the scores)."""
     best_by: ScoreFirst = "start_zero"
     """Which score of `train`'s checkpoint scoring comes first: `start_zero` (survival from the
-    clip's first frame on nominal physics) or `completion` (the mean share of the clip survived
-    from its scoring starts, which favours a policy that recovers into the middle of the clip);
-    ties go to the other score, then to the latest checkpoint."""
+    clip's first frame on nominal physics) or `completion` (the mean fraction of the clip left
+    that it survives from `train.scoring_starts` evenly spaced starts, frame 0 among them, which
+    favours a policy that also lasts from starts in the middle of the clip); ties go to the other
+    score, then to the latest checkpoint. Train's `best_checkpoint` and its plot's star are the
+    `start_zero` choice."""
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
@@ -51,9 +53,12 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 
 def _best(train: Path, best_by: ScoreFirst) -> int:
-    best = best_scored(read_training_log(train), best_by)
+    # A run grown from a saved state has its whole log but only the checkpoints saved since.
+    kept = checkpoints_by_iteration(train)
+    rows = [row for row in read_training_log(train) if row["iteration"] in kept]
+    best = best_scored(rows, best_by)
     if best is None:
-        raise PipelineError(f"{train}: no checkpoint of this training was scored")
+        raise PipelineError(f"{train}: none of its checkpoints was scored")
     return best["iteration"]
 
 

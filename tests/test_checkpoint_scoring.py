@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -74,7 +75,7 @@ def test_scoring_at_checkpoints_leaves_training_bit_for_bit_and_scores_the_saved
     assert rescored == {key: rows[1][key] for key in ("start_zero_s", "completion")}
 
 
-def test_best_by_completion_picks_the_checkpoint_that_recovers_into_the_clip(tmp_path: Path) -> None:
+def test_best_by_completion_picks_the_checkpoint_that_lasts_from_the_clips_middle(tmp_path: Path) -> None:
     """On the committed log of the 132 M-sample G1 dance-window run, start-zero first picks
     checkpoint 35700 (9.98 s, completion 0.535); completion first picks 42400 (9.78 s, 0.743), the
     one whose fixed-grid validation lasts longer from the window's middle."""
@@ -98,3 +99,16 @@ def test_best_by_completion_picks_the_checkpoint_that_recovers_into_the_clip(tmp
         9.78,
         0.7428,
     )
+
+
+def test_export_ranks_only_the_checkpoints_it_has_in_the_order_asked(tmp_path: Path) -> None:
+    """A run grown from a saved state logs iterations whose checkpoints it does not hold."""
+    from rd_pipeline.stages.export import _best
+
+    scores = {100: (9.9, 0.9), 200: (6.0, 0.7), 300: (8.0, 0.5)}
+    rows = [{"iteration": it, "start_zero_s": sz, "completion": c} for it, (sz, c) in scores.items()]
+    (tmp_path / "training_log.jsonl").write_text("".join(json.dumps(row) + "\n" for row in rows))
+    (tmp_path / "checkpoints").mkdir()
+    for it in (200, 300):
+        checkpoint_path(tmp_path, it).touch()
+    assert (_best(tmp_path, "start_zero"), _best(tmp_path, "completion")) == (300, 200)

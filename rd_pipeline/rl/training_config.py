@@ -33,8 +33,9 @@ class TrainConfig:
     """Train on part of the motion, `START:END` in seconds (empty: all of it)."""
     scoring_starts: int = 8
     """Start frames, evenly spaced over the clip from frame 0, from which each checkpoint is rolled out
-    with its mean action on nominal physics; `export` takes the best-scored checkpoint (late PPO
-    updates can knock back a policy that had learned the clip)."""
+    with its mean action on nominal physics; `export` takes the best-scored checkpoint, as
+    `export.best_by` orders the scores (late PPO updates can knock back a policy that had learned
+    the clip)."""
     env: EnvConfig = EnvConfig()
     """Environment."""
     ppo: PpoConfig = PpoConfig()
