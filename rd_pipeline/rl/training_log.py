@@ -14,6 +14,12 @@ LOG_FILE = "training_log.jsonl"
 
 ScoreFirst = Literal["start_zero", "completion"]
 
+SCORE_ORDER: dict[str, tuple[str, str]] = {
+    "start_zero": ("start_zero_s", "completion"),
+    "completion": ("completion", "start_zero_s"),
+}
+"""The log fields a checkpoint's score is compared by, in order, for each `ScoreFirst`."""
+
 
 def checkpoint_path(folder: Path, iteration: int) -> Path:
     """Where a training folder keeps the checkpoint saved after `iteration` iterations."""
@@ -48,6 +54,5 @@ def best_scored(rows: list[dict], first: ScoreFirst = "start_zero") -> dict | No
     completion (or, with `first="completion"`, the other way round), then the latest; None when
     no row has a score."""
     scored = [row for row in rows if "start_zero_s" in row]
-    if first == "completion":
-        return max(scored, key=lambda row: (row["completion"], row["start_zero_s"], row["iteration"]), default=None)
-    return max(scored, key=lambda row: (row["start_zero_s"], row["completion"], row["iteration"]), default=None)
+    order = SCORE_ORDER[first]
+    return max(scored, key=lambda row: (*(row[name] for name in order), row["iteration"]), default=None)
