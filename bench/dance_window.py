@@ -171,6 +171,7 @@ def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
         "commit": commit,
         "start_zero_s": validation.start_zero_survival_s,
         "mean_survival_s": validation.mean_survival_s,
+        "mean_survival_ceiling_s": validation.mean_survival_ceiling_s,
         "zero_action_start_zero_s": validation.zero_action_start_zero_survival_s,
         "E_mpbpe": details["nominal"]["policy"]["fixed_grid"]["E_mpbpe"],
         "E_mpjpe": validation.E_mpjpe,
@@ -193,6 +194,7 @@ def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
         "export_key": details["policy_key"],
         "fixed_grid_start_s": per_start["policy"]["start_s"],
         "fixed_grid_survival_s": per_start["policy"]["survival_s"],
+        "fixed_grid_most_s": per_start["policy"]["most_s"],
         "fixed_grid_zero_action_survival_s": per_start["zero_action"]["survival_s"],
         "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(clipped),
     }
@@ -233,6 +235,9 @@ def _plot(result: dict[str, Any], path: Path) -> None:
         ms=3,
         color="gray",
         label="zero action",
+    )
+    starts.plot(
+        result["fixed_grid_start_s"], result["fixed_grid_most_s"], ":", color="black", label="to the clip's end"
     )
     starts.set(
         xlabel="start in clip (s)", ylabel="survival (s)", title="survival per fixed-grid start, 500 Hz mesh model"

@@ -9,7 +9,7 @@ from typing import Any
 from rd_pipeline.artifacts.stage import Stage, StageContext, typed_config
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.rl.training_config import TrainConfig
-from rd_pipeline.rl.training_log import ScoreFirst, best_scored, checkpoints_by_iteration, read_training_log
+from rd_pipeline.rl.training_log import ScoreFirst, best_held
 from rd_pipeline.robots.assets import model_files
 
 REFERENCE_STAGES = ("retarget", "import")
@@ -53,10 +53,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 
 def _best(train: Path, best_by: ScoreFirst) -> int:
-    # A run grown from a saved state has its whole log but only the checkpoints saved since.
-    kept = checkpoints_by_iteration(train)
-    rows = [row for row in read_training_log(train) if row["iteration"] in kept]
-    best = best_scored(rows, best_by)
+    best = best_held(train, best_by)
     if best is None:
         raise PipelineError(f"{train}: none of its checkpoints was scored")
     return best["iteration"]

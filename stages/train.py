@@ -23,7 +23,7 @@ PROFILE_FILE = "sampler_profile.png"
 
 def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.rl.runner import continued_from, training_metrics
-    from rd_pipeline.rl.training_log import best_scored
+    from rd_pipeline.rl.training_log import best_held
 
     config: TrainConfig = ctx.params
     # Checkpoints and the log live in the work folder, which survives an interruption.
@@ -31,10 +31,10 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     job, clip = _job(ctx, config, work)
     outcome = _train(ctx, job)
     rows = _into_artifact(work, ctx.out_dir)
-    _plot(rows, outcome, ctx.out_dir)
     # The last iteration is always a scored checkpoint, so there is a best one.
-    best = best_scored(rows)
+    best = best_held(ctx.out_dir)
     assert best is not None
+    _plot(rows, best, outcome, ctx.out_dir)
     return {
         **training_metrics(rows, outcome, config, best),
         "continued_from": continued_from(ctx.out_dir),
@@ -91,12 +91,12 @@ def _into_artifact(work: Path, out_dir: Path) -> list[dict]:
     return rows
 
 
-def _plot(rows: list[dict], outcome: TrainingOutcome, out_dir: Path) -> None:
+def _plot(rows: list[dict], best: dict, outcome: TrainingOutcome, out_dir: Path) -> None:
     """The learning curve and the sampler's failure profile, beside the checkpoints."""
     from rd_pipeline.rl.trainer import plot_learning_curve
     from rd_pipeline.sampling.plots import plot_sampler_profile
 
-    plot_learning_curve(rows, out_dir / CURVE_FILE)
+    plot_learning_curve(rows, best, out_dir / CURVE_FILE)
     uniform = 1 / len(outcome.failure_rate)
     plot_sampler_profile(outcome.failure_rate, outcome.probabilities, uniform, out_dir / PROFILE_FILE)
 

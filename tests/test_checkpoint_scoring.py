@@ -9,6 +9,7 @@ import pytest
 import torch
 from conftest import PROJECT, h1_2_dance_env
 
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.rl.actions import ActionConfig
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal, scoring_starts, survival, zero_action
@@ -16,7 +17,7 @@ from rd_pipeline.rl.ppo import MultiHeadPPO, build_ppo
 from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
 from rd_pipeline.rl.trainer import train
-from rd_pipeline.rl.training_log import best_scored, checkpoint_path, read_training_log
+from rd_pipeline.rl.training_log import best_held, best_scored, checkpoint_path, read_training_log
 
 # With every joint residual, the zero action is the reference itself: a policy that stands a while.
 CONFIG = EnvConfig(num_envs=4, threads=2, actions=ActionConfig(mode="all"))
@@ -85,7 +86,8 @@ def test_best_by_completion_picks_the_checkpoint_that_lasts_from_the_clips_middl
     with gzip.open(PROJECT / "bench" / "results" / "dance_window_state" / "training_log.jsonl.gz") as packed:
         with open(tmp_path / "training_log.jsonl", "wb") as log:
             shutil.copyfileobj(packed, log)
-    rows = read_training_log(tmp_path)
+    # The saved state grows with the run; these are the choices over its first 43,000 iterations.
+    rows = [row for row in read_training_log(tmp_path) if row["iteration"] <= 43000]
     by_start_zero = best_scored(rows)
     by_completion = best_scored(rows, "completion")
     assert by_start_zero is not None and by_completion is not None
@@ -112,3 +114,12 @@ def test_export_ranks_only_the_checkpoints_it_has_in_the_order_asked(tmp_path: P
     for it in (200, 300):
         checkpoint_path(tmp_path, it).touch()
     assert (_best(tmp_path, "start_zero"), _best(tmp_path, "completion")) == (300, 200)
+    # train's best_checkpoint and its curve's star are the same choice
+    assert best_held(tmp_path) == rows[2]
+
+
+def test_export_of_a_folder_without_a_training_log_is_one_line(tmp_path: Path) -> None:
+    from rd_pipeline.stages.export import _best
+
+    with pytest.raises(PipelineError, match=f"^{tmp_path / 'training_log.jsonl'}: no training log here$"):
+        _best(tmp_path, "start_zero")

@@ -154,6 +154,11 @@ def test_smoke_profile_trains_exports_and_validates(robot: str, motion: str, art
         assert np.mean(per_start["survival_s"]) == pytest.approx(grid["mean_survival_s"], abs=0.005)
         start_zero = report["nominal"][controller]["start_zero"]["mean_survival_s"]
         assert per_start["survival_s"][0] == pytest.approx(start_zero, abs=0.005)
+        # A start can last at most what is left of the clip; the grid's ceiling is their mean.
+        left = [report["reference"]["duration_s"] - start for start in per_start["start_s"]]
+        assert per_start["most_s"] == pytest.approx(left, abs=0.021)
+        assert all(s <= most for s, most in zip(per_start["survival_s"], per_start["most_s"]))
+        assert grid["mean_survival_ceiling_s"] == pytest.approx(np.mean(left), abs=0.021)
     for name in ("report.md", "drift.png", "survival_per_start.png", "sim2sim.rrd"):
         assert (validate / name).stat().st_size > 0, name
     assert "| zero_action |" in (validate / "report.md").read_text()

@@ -74,6 +74,11 @@ def _survival_table(report: dict) -> list[str]:
         cells = [_cell(zero["mean_survival_s"]), _cell(grid["completion_pct"]), _cell(grid["mean_survival_s"])]
         cells += [_cell(grid[f"success_{t}s_pct"]) for t in SUCCESS_THRESHOLDS_S]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    ceiling = report["nominal"]["policy"]["fixed_grid"]["mean_survival_ceiling_s"]
+    lines += [
+        "",
+        f"A start can last at most what is left of the clip: the mean survival can be at most {ceiling:.2f} s.",
+    ]
     return lines
 
 
@@ -154,6 +159,8 @@ def plot_report(report: dict, out_dir: Path) -> None:
         per_start = report["nominal"][name]["per_start"]
         starts = [s + offset for s in per_start["start_s"]]
         ax.bar(starts, per_start["survival_s"], width=width, color=colors[name], label=name)
+    most = report["nominal"]["policy"]["per_start"]
+    ax.step(most["start_s"], most["most_s"], where="mid", color="grey", lw=1, label="to the clip's end")
     ax.set_xlabel("start time (s)")
     ax.set_ylabel("survival (s)")
     ax.legend(fontsize=8)

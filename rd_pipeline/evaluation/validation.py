@@ -172,6 +172,7 @@ def _nominal_summary(rollouts: list[Rollout], control_hz: float, rng: np.random.
         "per_start": {
             "start_s": [r.start_frame / control_hz for r in rollouts],
             "survival_s": [r.steps / control_hz for r in rollouts],
+            "most_s": [r.remaining_steps / control_hz for r in rollouts],
         },
     }
 

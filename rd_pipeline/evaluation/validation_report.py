@@ -23,6 +23,8 @@ class ValidationReport:
     """Fixed-grid rollouts that reached the end of the clip (%)."""
     mean_survival_s: float
     """Mean survival over the fixed-grid starts (s)."""
+    mean_survival_ceiling_s: float
+    """The most `mean_survival_s` can be: each start lasting what is left of the clip (s)."""
     zero_action_mean_survival_s: float
     """The same for zero action."""
     E_g_mpbpe: float | None
@@ -49,6 +51,7 @@ class ValidationReport:
             zero_action_start_zero_survival_s=zero["start_zero"]["mean_survival_s"],
             completion_pct=policy["fixed_grid"]["completion_pct"],
             mean_survival_s=policy["fixed_grid"]["mean_survival_s"],
+            mean_survival_ceiling_s=policy["fixed_grid"]["mean_survival_ceiling_s"],
             zero_action_mean_survival_s=zero["fixed_grid"]["mean_survival_s"],
             E_g_mpbpe=policy["fixed_grid"]["E_g_mpbpe"],
             E_mpjpe=policy["fixed_grid"]["E_mpjpe"],

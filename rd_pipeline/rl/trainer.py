@@ -19,7 +19,7 @@ from rd_pipeline.rl.distributed import ONE_PROCESS, Ranks, gather_to_leader, sum
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.ppo import MultiHeadPPO
 from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.training_log import LOG_FILE, best_scored, checkpoint_path
+from rd_pipeline.rl.training_log import LOG_FILE, checkpoint_path
 
 
 def rank_state(env: TrackingEnv) -> dict:
@@ -212,9 +212,9 @@ def _logged_iteration(line: str) -> float:
         return float("inf")
 
 
-def plot_learning_curve(rows: list[dict], path: Path) -> None:
+def plot_learning_curve(rows: list[dict], best: dict, path: Path) -> None:
     """Reward per group and episode length per iteration, and each checkpoint's start-zero survival
-    with the best-scored one marked."""
+    with `best` (the log row of the checkpoint chosen) marked."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -232,10 +232,8 @@ def plot_learning_curve(rows: list[dict], path: Path) -> None:
     axes[1].set_ylabel("mean episode length (s)")
     scored = [r for r in rows if "start_zero_s" in r]
     axes[2].plot([r["iteration"] for r in scored], [r["start_zero_s"] for r in scored], "o-", lw=1, ms=3)
-    best = best_scored(rows)
-    if best is not None:
-        axes[2].plot([best["iteration"]], [best["start_zero_s"]], "r*", ms=12, label=f"best: {best['iteration']}")
-        axes[2].legend(fontsize=7)
+    axes[2].plot([best["iteration"]], [best["start_zero_s"]], "r*", ms=12, label=f"best: {best['iteration']}")
+    axes[2].legend(fontsize=7)
     axes[2].set_xlabel("checkpoint iteration")
     axes[2].set_ylabel("start-zero survival, nominal (s)")
     fig.tight_layout()

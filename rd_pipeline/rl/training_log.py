@@ -40,6 +40,8 @@ def checkpoints_by_iteration(folder: Path) -> dict[int, Path]:
 def read_training_log(folder: Path) -> list[dict]:
     """The rows of a training folder's log, one per iteration, oldest first."""
     path = folder / LOG_FILE
+    if not path.is_file():
+        raise PipelineError(f"{path}: no training log here")
     rows = []
     for number, line in enumerate(path.read_text().splitlines(), start=1):
         try:
@@ -56,3 +58,11 @@ def best_scored(rows: list[dict], first: ScoreFirst = "start_zero") -> dict | No
     scored = [row for row in rows if "start_zero_s" in row]
     order = SCORE_ORDER[first]
     return max(scored, key=lambda row: (*(row[name] for name in order), row["iteration"]), default=None)
+
+
+def best_held(folder: Path, first: ScoreFirst = "start_zero") -> dict | None:
+    """The log row of the best-scored checkpoint among those the folder holds (see `best_scored`):
+    a run grown from a saved state logs the whole training but holds only the checkpoints saved
+    since."""
+    held = checkpoints_by_iteration(folder)
+    return best_scored([row for row in read_training_log(folder) if row["iteration"] in held], first)
