@@ -8,6 +8,7 @@ from typing import Any
 
 from rd_pipeline.artifacts.stage import Stage, StageContext, typed_config
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.params import ParamRangeError
 from rd_pipeline.rl.training_config import TrainConfig
 from rd_pipeline.rl.training_log import ScoreFirst, best_held
 from rd_pipeline.robots.assets import model_files
@@ -27,8 +28,15 @@ class ExportConfig:
     clip's first frame on nominal physics) or `completion` (the mean fraction of the clip left
     that it survives from `train.scoring_starts` evenly spaced starts, frame 0 among them, which
     favours a policy that also lasts from starts in the middle of the clip); ties go to the other
-    score, then to the latest checkpoint. Train's `best_checkpoint` and its plot's star are the
+    score, then to the latest checkpoint; only with `checkpoint` 0. Train's `best_checkpoint` and its plot's star are the
     `start_zero` choice."""
+
+    def __post_init__(self) -> None:
+        # A chosen checkpoint with a ranking would key a second artifact of the same export.
+        if self.checkpoint and self.best_by != "start_zero":
+            raise ParamRangeError(
+                "best_by", f"ranks checkpoints only when checkpoint is 0, got checkpoint {self.checkpoint}"
+            )
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:

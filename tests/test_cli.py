@@ -102,6 +102,16 @@ def test_out_of_range_params_are_one_line_naming_the_parameter(assignment: str, 
     assert not (artifacts / "parse").exists()
 
 
+def test_a_ranking_beside_a_chosen_checkpoint_is_refused(artifacts: Path) -> None:
+    """It would change nothing but the key: a second artifact of the same export."""
+    result = cli("run", "--until", "parse", "--set", "export.checkpoint=400", "export.best_by=completion")
+    assert result.returncode != 0
+    assert result.stderr.strip().splitlines()[-1] == (
+        "error: parameter 'export.best_by' ranks checkpoints only when checkpoint is 0, got checkpoint 400"
+    )
+    assert not (artifacts / "parse").exists()
+
+
 @pytest.mark.offline
 def test_fetch_lafan_rejects_a_wrong_archive(tmp_path: Path) -> None:
     archive = tmp_path / "lafan1.zip"
