@@ -28,8 +28,8 @@ class ExportConfig:
     clip's first frame on nominal physics) or `completion` (the mean fraction of the clip left
     that it survives from `train.scoring_starts` evenly spaced starts, frame 0 among them, which
     favours a policy that also lasts from starts in the middle of the clip); ties go to the other
-    score, then to the latest checkpoint; only with `checkpoint` 0. Train's `best_checkpoint` and its plot's star are the
-    `start_zero` choice."""
+    score, then to the latest checkpoint; only with `checkpoint` 0. Train's `best_checkpoint` and
+    its plot's star are the `start_zero` choice."""
 
     def __post_init__(self) -> None:
         # A chosen checkpoint with a ranking would key a second artifact of the same export.
