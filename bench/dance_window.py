@@ -14,7 +14,8 @@ iterations that fill M minutes (the iteration count, not the clock, keys the art
 
 Unless `--until train`, writes `<out>` with the exported checkpoint's figures on the 500 Hz mesh
 model (`validate`), every scored checkpoint's training-model start-zero survival against samples,
-the survival from each fixed-grid start beside zero action's, the options trained with, and
+the survival from each fixed-grid start beside zero action's and the most it could be (to the
+window's end; their mean is `mean_survival_ceiling_s`), the options trained with, and
 `<out stem>_curve.png` (start-zero against samples on a log axis; per-start survival).
 """
 

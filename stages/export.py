@@ -28,14 +28,15 @@ class ExportConfig:
     clip's first frame on nominal physics) or `completion` (the mean fraction of the clip left
     that it survives from `train.scoring_starts` evenly spaced starts, frame 0 among them, which
     favours a policy that also lasts from starts in the middle of the clip); ties go to the other
-    score, then to the latest checkpoint; only with `checkpoint` 0. Train's `best_checkpoint` and
-    its plot's star are the `start_zero` choice."""
+    score, then to the latest checkpoint. Train's `best_checkpoint` and its plot's star are the
+    `start_zero` choice. Only with `checkpoint` 0; refused beside a chosen one."""
 
     def __post_init__(self) -> None:
         # A chosen checkpoint with a ranking would key a second artifact of the same export.
         if self.checkpoint and self.best_by != "start_zero":
             raise ParamRangeError(
-                "best_by", f"ranks checkpoints only when checkpoint is 0, got checkpoint {self.checkpoint}"
+                "best_by",
+                f"ranks checkpoints only when checkpoint is 0, got checkpoint {self.checkpoint} (drop one of the two)",
             )
 
 
@@ -63,7 +64,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 def _best(train: Path, best_by: ScoreFirst) -> int:
     best = best_held(train, best_by)
     if best is None:
-        raise PipelineError(f"{train}: none of its checkpoints was scored")
+        raise PipelineError(f"{train}: holds no scored checkpoint")
     return best["iteration"]
 
 

@@ -155,10 +155,15 @@ def test_smoke_profile_trains_exports_and_validates(robot: str, motion: str, art
         start_zero = report["nominal"][controller]["start_zero"]["mean_survival_s"]
         assert per_start["survival_s"][0] == pytest.approx(start_zero, abs=0.005)
         # A start can last at most what is left of the clip; the grid's ceiling is their mean.
-        left = [report["reference"]["duration_s"] - start for start in per_start["start_s"]]
-        assert per_start["most_s"] == pytest.approx(left, abs=0.021)
+        # (the last frame is one control step before the clip's end)
+        step = 1 / report["rates"]["control_hz"]
+        left = [report["reference"]["duration_s"] - start - step for start in per_start["start_s"]]
+        assert per_start["most_s"] == pytest.approx(left, abs=1e-6)
         assert all(s <= most for s, most in zip(per_start["survival_s"], per_start["most_s"]))
-        assert grid["mean_survival_ceiling_s"] == pytest.approx(np.mean(left), abs=0.021)
+        assert grid["mean_survival_ceiling_s"] == pytest.approx(np.mean(left), abs=5e-4)
+    ceiling = report["nominal"]["policy"]["fixed_grid"]["mean_survival_ceiling_s"]
+    assert json.loads((validate / "manifest.json").read_text())["metrics"]["mean_survival_ceiling_s"] == ceiling
+    assert f"the mean survival can be at most {ceiling:.2f} s." in (validate / "report.md").read_text()
     for name in ("report.md", "drift.png", "survival_per_start.png", "sim2sim.rrd"):
         assert (validate / name).stat().st_size > 0, name
     assert "| zero_action |" in (validate / "report.md").read_text()

@@ -160,7 +160,7 @@ def plot_report(report: dict, out_dir: Path) -> None:
         starts = [s + offset for s in per_start["start_s"]]
         ax.bar(starts, per_start["survival_s"], width=width, color=colors[name], label=name)
     most = report["nominal"]["policy"]["per_start"]
-    ax.step(most["start_s"], most["most_s"], where="mid", color="grey", lw=1, label="to the clip's end")
+    ax.plot(most["start_s"], most["most_s"], ":", color="black", label="to the clip's end")
     ax.set_xlabel("start time (s)")
     ax.set_ylabel("survival (s)")
     ax.legend(fontsize=8)

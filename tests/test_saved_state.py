@@ -1,0 +1,68 @@
+"""A training restored from a saved state (`bench/dance_window_state.py`) carries its whole log but
+holds only the checkpoints saved since; train and export choose among the checkpoints it holds."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import PROJECT
+
+from rd_pipeline.api import workspace
+from rd_pipeline.artifacts.store import MANIFEST
+from rd_pipeline.rl.training_log import checkpoints_by_iteration, read_training_log
+
+SETS = ("train.checkpoint_every=1",)
+ROBOT = "g1"
+MOTION = "dance1_subject2"
+
+
+def _plan(iterations: int) -> workspace.Plan:
+    overrides = ("train.clip=11:21", f"train.iterations={iterations}", *SETS)
+    return workspace.plan(ROBOT, MOTION, "smoke", overrides=overrides, seed=0)
+
+
+def _state(action: str, iterations: int, state: Path) -> subprocess.CompletedProcess:
+    script = str(PROJECT / "bench" / "dance_window_state.py")
+    args = [action, "--profile", "smoke", "--iterations", str(iterations), "--set", *SETS, "--state", str(state)]
+    return subprocess.run([sys.executable, script, *args], capture_output=True, text=True, cwd=PROJECT)
+
+
+def _manifest(plan: workspace.Plan, stage: str) -> dict:
+    artifact = plan.store.find(stage, ROBOT, MOTION, plan.stage(stage).key)
+    assert artifact is not None
+    return json.loads((artifact.path / MANIFEST).read_text())
+
+
+@pytest.mark.slow
+def test_a_restored_run_chooses_among_the_checkpoints_it_holds(
+    artifacts: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    workspace.run(_plan(2), until="train")
+    state = tmp_path / "state"
+    saved = _state("save", 2, state)
+    assert saved.returncode == 0, saved.stderr
+    assert sorted(path.name for path in state.iterdir()) == ["model_2.pt", "state.json", "training_log.jsonl.gz"]
+    # The saved log's best score is iteration 1's, whose checkpoint the state does not hold.
+    packed = state / "training_log.jsonl.gz"
+    rows = [json.loads(line) for line in gzip.decompress(packed.read_bytes()).splitlines()]
+    rows[0]["start_zero_s"] = 99.0
+    packed.write_bytes(gzip.compress("".join(json.dumps(row) + "\n" for row in rows).encode()))
+    monkeypatch.setenv("RD_ARTIFACTS", str(tmp_path / "another_store"))
+    restored = _state("restore", 4, state)
+    assert restored.returncode == 0, restored.stderr
+    grown = _plan(4)
+    workspace.run(grown, until="export")
+    train = grown.store.find("train", ROBOT, MOTION, grown.stage("train").key)
+    assert train is not None
+    log = read_training_log(train.path)
+    assert [row["iteration"] for row in log] == [1, 2, 3, 4] and log[0]["start_zero_s"] == 99.0
+    assert list(checkpoints_by_iteration(train.path)) == [2, 3, 4]
+    scores = {row["iteration"]: (row["start_zero_s"], row["completion"]) for row in log[1:]}
+    best = max(scores, key=lambda it: (*scores[it], it))
+    assert _manifest(grown, "train")["metrics"]["best_checkpoint"] == best
+    assert _manifest(grown, "export")["metrics"]["checkpoint_iteration"] == best
