@@ -8,7 +8,7 @@ a finished one is cached), then writes `<out>.json`: `clip_s`, `start_zero_s`, `
 `wall_min` (with the minutes of each run a grown training continued), `samples`, the validation
 figures of the exported checkpoint, which checkpoint that is and its start-zero survival on the
 training model beside the final one's and every checkpoint's, the survival from each fixed-grid start
-beside zero action's, and how fast the reference moves in each second. It copies the learning curve,
+beside zero action's and the most it could be (to the clip's end), and how fast the reference moves in each second. It copies the learning curve,
 the sampler profile, the survival per start and the validation report beside it.
 """
 
@@ -87,6 +87,7 @@ def _result(plan: workspace.Plan, args: argparse.Namespace) -> dict[str, Any]:
         "start_zero_s": validation.start_zero_survival_s,
         "completion_pct": validation.completion_pct,
         "mean_survival_s": validation.mean_survival_s,
+        "mean_survival_ceiling_s": validation.mean_survival_ceiling_s,
         "E_g_mpbpe": validation.E_g_mpbpe,
         "E_mpbpe": policy["fixed_grid"]["E_mpbpe"],
         "zero_action_start_zero_s": validation.zero_action_start_zero_survival_s,
@@ -111,6 +112,7 @@ def _result(plan: workspace.Plan, args: argparse.Namespace) -> dict[str, Any]:
         "export_key": report["policy_key"],
         "fixed_grid_start_s": per_start["policy"]["start_s"],
         "fixed_grid_survival_s": per_start["policy"]["survival_s"],
+        "fixed_grid_most_s": per_start["policy"]["most_s"],
         "fixed_grid_zero_action_survival_s": per_start["zero_action"]["survival_s"],
         "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(reference),
     }
