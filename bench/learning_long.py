@@ -8,8 +8,9 @@ a finished one is cached), then writes `<out>.json`: `clip_s`, `start_zero_s`, `
 `wall_min` (with the minutes of each run a grown training continued), `samples`, the validation
 figures of the exported checkpoint, which checkpoint that is and its start-zero survival on the
 training model beside the final one's and every checkpoint's, the survival from each fixed-grid start
-beside zero action's and the most it could be (to the clip's end), and how fast the reference moves in each second. It copies the learning curve,
-the sampler profile, the survival per start and the validation report beside it.
+beside zero action's and the most it could be (to the clip's end), and how fast the reference
+moves in each second. It copies the learning curve, the sampler profile, the survival per start
+and the validation report beside it.
 """
 
 from __future__ import annotations
