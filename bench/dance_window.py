@@ -35,11 +35,11 @@ import matplotlib.pyplot as plt
 from provenance import head_commit
 from training_hours import training_hours
 
-from rd_pipeline.api import workspace
+from rd_pipeline.api import windows, workspace
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.validation_report import ValidationReport
-from rd_pipeline.motion.activity import joint_speed_p95_per_second, window_at_speed_quantile
+from rd_pipeline.motion.activity import joint_speed_p95_per_second
 from rd_pipeline.rl.training_log import read_training_log
 
 OPTIONS = {
@@ -122,11 +122,10 @@ def _plan(args: argparse.Namespace, clip: str, iterations: int) -> workspace.Pla
 
 
 def _window_clip(args: argparse.Namespace) -> str:
-    """The `--busiest`-second window of the whole take's reference (made by the pipeline up to
-    `prior`) at `--speed-quantile` of its windows' joint speed."""
+    """The `--busiest`-second window of the whole take's reference at `--speed-quantile` of its
+    windows' joint speed (what `rd-pipeline run --window` chooses)."""
     whole = workspace.plan(args.robot, args.motion, args.profile, seed=args.seed)
-    workspace.run(whole, until="prior", resume=True)
-    window = window_at_speed_quantile(workspace.reference(whole), args.busiest, args.speed_quantile)
+    window = windows.speed_window(whole, args.busiest, args.speed_quantile)
     print(
         f"{args.busiest} s window at speed quantile {args.speed_quantile:g}: {window.clip} s, "
         f"joint speed p95 {window.joint_speed_p95} rad/s"

@@ -185,3 +185,47 @@ def test_misused_options_name_what_is_wrong(args: tuple[str, ...], message: str,
     assert result.returncode == 2
     assert result.stderr.strip().splitlines()[-1].startswith(message)
     assert not artifacts.exists()
+
+
+def test_window_trains_on_the_stretch_the_reference_speed_chooses(artifacts: Path) -> None:
+    """H1-2 dance2_subject4 (225.7 s of dataset CSV): its typical ten seconds and its busiest,
+    read from the imported reference; the plan is the one `--clip` gives for the same seconds."""
+    take = ("--robot", "h1_2", "--motion", "dance2_subject4")
+    made = cli("run", *take, "--window", "10", "--until", "import")
+    assert made.returncode == 0, made.stderr
+    assert "window: 107:117 s at speed quantile 0.5 (joint speed p95 5.248 rad/s)" in made.stderr
+    busiest = cli("plan", *take, "--window", "10", "--window-speed", "1", "--json")
+    assert busiest.returncode == 0, busiest.stderr
+    assert "window: 193:203 s at speed quantile 1 (joint speed p95 7.731 rad/s)" in busiest.stderr
+    clipped = cli("plan", *take, "--clip", "193:203", "--json")
+    by_window = {row["stage"]: row["key"] for row in json.loads(busiest.stdout)}
+    by_clip = {row["stage"]: row["key"] for row in json.loads(clipped.stdout)}
+    assert by_window == by_clip
+    assert by_window["train"] != by_window["export"]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (
+            ("plan", "--window", "10"),
+            "error: window of g1/dance1_subject2: chosen from the reference, which stage 'retarget' has not made yet",
+        ),
+        (
+            ("run", "--window", "10", "--clip", "0:10"),
+            "error: --window 10 and train.clip=0:10 both choose the clip: give one",
+        ),
+        (
+            ("run", "--window", "10", "--window-speed", "1.5"),
+            "error: window of g1/dance1_subject2: speed quantile 1.5 is outside [0, 1]",
+        ),
+        (("run", "--window", "0"), "error: window of g1/dance1_subject2: must last 1 s or more, got 0 s"),
+    ],
+)
+def test_a_window_that_cannot_be_chosen_is_one_line_before_any_stage(
+    args: tuple[str, ...], message: str, artifacts: Path
+) -> None:
+    result = cli(*args)
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines()[-1] == message
+    assert not artifacts.exists()

@@ -28,6 +28,12 @@ class PlanOptions:
     """Force the motion source: `bvh` (parse + retarget) or `csv` (import)."""
     clip: str | None = None
     """Train on part of the motion, `START:END` in seconds (sets train.clip)."""
+    window: int | None = None
+    """Train on a stretch of this many seconds chosen by the reference's joint speed (sets
+    train.clip to it; see --window-speed)."""
+    window_speed: float = 0.5
+    """Which stretch --window takes: the one whose joint-speed p95 is nearest this quantile of the
+    take's (1: the busiest; 0.5: a typical stretch)."""
     backend: str | None = None
     """Physics backend for training, `rollout`, `cpu` or `warp` (sets train.env.backend)."""
     nproc: int | None = None

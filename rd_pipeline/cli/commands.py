@@ -14,7 +14,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from rd_pipeline import paths
-from rd_pipeline.api import sweeps, workspace
+from rd_pipeline.api import sweeps, windows, workspace
 from rd_pipeline.api.ablation import STUDIES, ablation_table, write_ablation
 from rd_pipeline.artifacts.runner import StageOutcome
 from rd_pipeline.cli.args import (
@@ -44,9 +44,25 @@ def _assignments(cmd: PlanOptions) -> tuple[str, ...]:
     return cmd.set + clip + backend + ranks
 
 
-def run(cmd: Run, console: Console) -> int:
+def _plan(cmd: PlanOptions, console: Console, make_reference: bool) -> workspace.Plan:
+    """The plan of `cmd`; with `--window`, its clip is the window the take's reference chooses
+    (made first when `make_reference`)."""
     assignments = _assignments(cmd)
-    plan = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
+    planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
+    if cmd.window is None:
+        return planned
+    clips = [assignment for assignment in assignments if assignment.startswith("train.clip=")]
+    if clips:
+        raise PipelineError(f"--window {cmd.window} and {clips[0]} both choose the clip: give one")
+    window = windows.speed_window(planned, cmd.window, cmd.window_speed, make_reference, console)
+    speed = f"joint speed p95 {window.joint_speed_p95:g} rad/s"
+    console.print(escape(f"window: {window.clip} s at speed quantile {cmd.window_speed:g} ({speed})"), highlight=False)
+    clipped = (*assignments, f"train.clip={window.clip}")
+    return workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, clipped, cmd.seed, cmd.source)
+
+
+def run(cmd: Run, console: Console) -> int:
+    plan = _plan(cmd, console, make_reference=True)
     source = plan.pipeline.source
     where = f"from {source}, profile {plan.profile}, artifacts in {plan.store.root}"
     console.print(escape(f"rd-pipeline: {cmd.robot}/{cmd.motion} {where}"))
@@ -64,8 +80,7 @@ def run(cmd: Run, console: Console) -> int:
 
 
 def plan(cmd: Plan, console: Console) -> int:
-    assignments = _assignments(cmd)
-    planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
+    planned = _plan(cmd, console, make_reference=False)
     rows: list[dict[str, Any]] = [
         {
             "stage": entry.name,

@@ -1,0 +1,44 @@
+"""Choose the stretch of a take to train on by how fast its reference moves.
+
+    plan = workspace.plan("h1_2", "dance2_subject4", profile="cpu")
+    window = windows.speed_window(plan, seconds=10, quantile=0.5)
+    clipped = workspace.plan("h1_2", "dance2_subject4", profile="cpu", overrides=(f"train.clip={window.clip}",))
+
+A take's ten seconds can be standing prelude or its most violent moment; the reference's joint
+speed tells them apart (`rd_pipeline.motion.activity`). The window is read from the whole take's
+reference, which no training param changes, so any plan of the take can make it.
+"""
+
+from __future__ import annotations
+
+from rich.console import Console
+
+from rd_pipeline.api import workspace
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion.activity import Window, window_at_speed_quantile
+
+
+def speed_window(
+    plan: workspace.Plan,
+    seconds: int,
+    quantile: float,
+    make: bool = True,
+    console: Console | None = None,
+) -> Window:
+    """The take's `seconds`-long window whose joint-speed p95 is nearest `quantile` of all its
+    windows' (1: the busiest, 0.5: a typical stretch). With `make`, the stages up to the reference
+    run first (cached ones do no work); without, the reference must be in the store already."""
+    take = f"{plan.robot}/{plan.motion}"
+    if seconds < 1:
+        raise PipelineError(f"window of {take}: must last 1 s or more, got {seconds} s")
+    if not 0.0 <= quantile <= 1.0:
+        raise PipelineError(f"window of {take}: speed quantile {quantile:g} is outside [0, 1]")
+    maker = workspace.providing(plan, "reference")
+    if make:
+        workspace.run(plan, until=maker, console=console)
+    elif workspace.artifact(plan, maker) is None:
+        raise PipelineError(f"window of {take}: chosen from the reference, which stage '{maker}' has not made yet")
+    try:
+        return window_at_speed_quantile(workspace.reference(plan), seconds, quantile)
+    except ValueError as exc:
+        raise PipelineError(f"window of {take}: {exc}") from None
