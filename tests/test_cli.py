@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import sys
 import zipfile
 from pathlib import Path
 
@@ -229,3 +231,15 @@ def test_a_window_that_cannot_be_chosen_is_one_line_before_any_stage(
     assert result.returncode == 2
     assert result.stderr.strip().splitlines()[-1] == message
     assert not artifacts.exists()
+
+
+@pytest.mark.offline
+def test_help_to_a_reader_that_left_ends_quietly(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`rd-pipeline run --help | head -1`: the help meets a closed pipe while tyro prints it."""
+    from rd_pipeline.cli.app import main
+
+    read, write = os.pipe()
+    os.close(read)
+    with os.fdopen(write, "w", buffering=1) as closed:  # each line reaches the pipe, as help does
+        monkeypatch.setattr(sys, "stdout", closed)
+        assert main(["run", "--help"]) == 0

@@ -183,15 +183,14 @@ def test_smoke_profile_trains_exports_and_validates(robot: str, motion: str, art
         assert on_onnx["nominal"]["policy"][protocol]["mean_survival_s"] == pytest.approx(
             report["nominal"]["policy"][protocol]["mean_survival_s"], abs=0.02 + 1e-9
         )
-    if robot == "g1":  # `view` puts the tracked robot beside the human and the reference once validated
+    if robot == "g1":  # `view` puts the tracked robot of the validation its params name beside the reference
         out = artifacts.parent / "view.rrd"
-        assert (
-            cli("view", "--robot", robot, "--motion", motion, "--profile", "smoke", "--out", str(out)).returncode == 0
-        )
+        onnx_view = ("--set", "validate.runtime=onnx", "--out", str(out))
+        assert cli("view", "--robot", robot, "--motion", motion, "--profile", "smoke", *onnx_view).returncode == 0
         rows: dict[str, int] = {}
         for chunk in RrdReader(str(out)).store().stream():
             if not chunk.is_static:
                 rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
-        steps = round(report["nominal"]["policy"]["start_zero"]["mean_survival_s"] * 50)
+        steps = round(on_onnx["nominal"]["policy"]["start_zero"]["mean_survival_s"] * 50)
         assert rows["/robot/tracked/pelvis"] == steps + 1 and rows["/robot/retarget/pelvis"] == 6575
         assert rows["/human/joints"] == 3945

@@ -50,6 +50,7 @@ def test_view_imported_robot_reference(artifacts: Path, tmp_path: Path) -> None:
     out = tmp_path / "h1.rrd"
     result = cli("view", "--robot", "h1", "--motion", "dance2_subject3", "--out", str(out))
     assert result.returncode == 0, result.stderr
+    assert "no validation of these params in the store: no tracked robot (profile smoke)" in result.stderr
     rows = _rows_per_entity(out)
     plots = {name: rows.pop(name) for name in list(rows) if name.startswith("/quality/")}
     assert plots == {f"/quality/import/{name}": 11285 for name in ("penetration_m", "root_speed_m_s")}

@@ -28,7 +28,38 @@ from rd_pipeline.errors import Interrupted, PipelineError, ShareDone
 
 
 def main(argv: list[str] | None = None) -> int:
-    command = tyro.extras.subcommand_cli_from_dict(
+    try:
+        command = _parse(argv)
+    except BrokenPipeError:  # `rd-pipeline run --help | head`
+        return _reader_left()
+    # Names, values and paths users give are printed literally: no emoji codes (`:100:`), no markup.
+    console = Console(stderr=True, soft_wrap=True, emoji=False)
+    try:
+        return _dispatch(command, console)
+    except PipelineError as exc:
+        console.print(f"[red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
+        return 2
+    except ShareDone as exc:
+        console.print(f"done: {escape(str(exc))}", highlight=False, soft_wrap=True)
+        return 0
+    except Interrupted as exc:
+        console.print(f"[red]interrupted[/]: no partial artifact was kept; {escape(str(exc))}")
+        return 130
+    except KeyboardInterrupt:
+        console.print("[red]interrupted[/]: no partial artifact was kept")
+        return 130
+    except BrokenPipeError:  # `rd-pipeline robots | head`
+        return _reader_left()
+
+
+def _reader_left() -> int:
+    """The reader of stdout left: say nothing more, not even while Python flushes at exit."""
+    os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return 0
+
+
+def _parse(argv: list[str] | None) -> object:
+    return tyro.extras.subcommand_cli_from_dict(
         {
             "run": Run,
             "plan": Plan,
@@ -46,25 +77,6 @@ def main(argv: list[str] | None = None) -> int:
         args=argv,
         description="LAFAN1 mocap -> humanoid dance policies, one DAG per (robot, motion).",
     )
-    # Names, values and paths users give are printed literally: no emoji codes (`:100:`), no markup.
-    console = Console(stderr=True, soft_wrap=True, emoji=False)
-    try:
-        return _dispatch(command, console)
-    except PipelineError as exc:
-        console.print(f"[red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
-        return 2
-    except ShareDone as exc:
-        console.print(f"done: {escape(str(exc))}", highlight=False, soft_wrap=True)
-        return 0
-    except Interrupted as exc:
-        console.print(f"[red]interrupted[/]: no partial artifact was kept; {escape(str(exc))}")
-        return 130
-    except KeyboardInterrupt:
-        console.print("[red]interrupted[/]: no partial artifact was kept")
-        return 130
-    except BrokenPipeError:  # `rd-pipeline robots | head`: the reader left; say nothing more
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 0
 
 
 def _dispatch(command: object, console: Console) -> int:

@@ -119,22 +119,15 @@ class Status:
 
 
 @dataclass(frozen=True)
-class View:
+class View(PlanOptions):
     """Write (or show) a rerun recording: human skeleton, robot reference and, once validated, the
-    tracked robot of the sim2sim start-zero rollout, on one timeline."""
+    tracked robot of the sim2sim start-zero rollout, on one timeline. The options that chose a
+    run's params (profile, clip, window, set, ...) choose which validation is shown."""
 
-    robot: str = DEFAULT_ROBOT
-    """Robot."""
-    motion: str = DEFAULT_MOTION
-    """Motion."""
     out: Path | None = None
     """Write an `.rrd` file here (headless); without it a viewer is spawned."""
     spawn: bool = False
     """Also open the written file in the rerun viewer."""
-    profile: str | None = None
-    """Parameter profile whose artifacts to show."""
-    source: str | None = None
-    """Force the motion source (`bvh` or `csv`)."""
 
 
 @dataclass(frozen=True)

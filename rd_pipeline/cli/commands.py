@@ -204,7 +204,7 @@ def view(cmd: View, console: Console) -> int:
     from rd_pipeline.viz.recording import TRACKED_FILE, record_motion
     from rd_pipeline.viz.rerun_view import display_available
 
-    planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, source=cmd.source)
+    planned = _plan(cmd, console, make_reference=True)
     # Only the stages that make motion are needed; they are computed or taken from the cache.
     until = workspace.providing(planned, "reference")
     outcomes = workspace.run(planned, until=until, console=console)
@@ -212,6 +212,8 @@ def view(cmd: View, console: Console) -> int:
     # The tracked robot is shown when this configuration has been validated; view never trains.
     validated = workspace.artifact(planned, "validate")
     tracked = validated / TRACKED_FILE if validated else None
+    if validated is None:
+        console.print(f"no validation of these params in the store: no tracked robot (profile {planned.profile})")
     out = cmd.out
     if out is None and not display_available():
         out = planned.store.root / "views" / f"{cmd.robot}_{cmd.motion}.rrd"
