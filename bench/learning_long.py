@@ -115,6 +115,8 @@ def _result(plan: workspace.Plan, args: argparse.Namespace) -> dict[str, Any]:
         "fixed_grid_survival_s": per_start["policy"]["survival_s"],
         "fixed_grid_most_s": per_start["policy"]["most_s"],
         "fixed_grid_zero_action_survival_s": per_start["zero_action"]["survival_s"],
+        "fixed_grid_ended_by": per_start["policy"]["ended_by"],
+        "fixed_grid_zero_action_ended_by": per_start["zero_action"]["ended_by"],
         "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(reference),
     }
 

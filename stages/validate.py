@@ -13,8 +13,7 @@ RECORDING_FILE = "sim2sim.rrd"
 
 def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.evaluation.report import CONTROLLERS, plot_report, write_json, write_markdown
-    from rd_pipeline.evaluation.validation import ReferenceClip, load_exported_spec, validate_policy
-    from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
+    from rd_pipeline.evaluation.validation import load_exported_spec, reference_clip, validate_policy
     from rd_pipeline.robots import load_robot
     from rd_pipeline.viz.recording import TRACKED_FILE, record_tracking, save_tracked
 
@@ -22,10 +21,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     exported = ctx.upstream["deployable_policy"]
     made = ctx.upstream["reference"]
     spec = load_exported_spec(exported.path, made.key)
-    start = spec.get("reference.start_frame")
-    end = spec.get("reference.end_frame")
-    motion = ReferenceMotion.load(made.path / REFERENCE_FILE).frames(start, end)
-    clip = ReferenceClip(made.stage, made.key, motion, start, end)
+    clip = reference_clip(spec, made.stage, made.key, made.path)
     robot = load_robot(ctx.robot_name)
     batches = len(CONTROLLERS) * (1 + len(config.randomized_seeds))
     with ctx.progress(batches, "sim2sim rollouts") as advance:
@@ -36,17 +32,22 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     plot_report(report, ctx.out_dir)
     tracked = validation.tracked
     assert tracked.body_pos is not None and tracked.body_quat is not None  # the first rollout keeps its poses
-    save_tracked(ctx.out_dir / TRACKED_FILE, tracked.body_pos, tracked.body_quat, start, motion.fps)
+    save_tracked(ctx.out_dir / TRACKED_FILE, tracked.body_pos, tracked.body_quat, clip.start_frame, clip.motion.fps)
     recording = f"{ctx.robot}_{ctx.motion}_sim2sim"
     record_tracking(
-        robot.model, motion, ctx.out_dir / TRACKED_FILE, recording, ctx.out_dir / RECORDING_FILE, first_frame=start
+        robot.model,
+        clip.motion,
+        ctx.out_dir / TRACKED_FILE,
+        recording,
+        ctx.out_dir / RECORDING_FILE,
+        first_frame=clip.start_frame,
     )
     return validation.report.headline()
 
 
 STAGE = Stage(
     name="validate",
-    version=5,
+    version=6,
     description="exported policy + reference -> sim2sim report (report.json/md, plots, .rrd) beside zero-action",
     params=ValidationConfig,
     provides="validation_report",

@@ -161,9 +161,17 @@ def test_smoke_profile_trains_exports_and_validates(robot: str, motion: str, art
         assert per_start["most_s"] == pytest.approx(left, abs=1e-6)
         assert all(s <= most for s, most in zip(per_start["survival_s"], per_start["most_s"]))
         assert grid["mean_survival_ceiling_s"] == pytest.approx(np.mean(left), abs=5e-4)
+        # What ended each: a failure named, or nothing where the start lasted to the clip's end.
+        ended = per_start["ended_by"]
+        assert len(ended) == grid["rollouts"]
+        assert all(
+            s == pytest.approx(most) for s, most, e in zip(per_start["survival_s"], per_start["most_s"], ended) if not e
+        )
+        assert all(part.split()[0] in ("tilted", "far", "floor") for e in ended if e for part in e.split(" + "))
     ceiling = report["nominal"]["policy"]["fixed_grid"]["mean_survival_ceiling_s"]
     assert json.loads((validate / "manifest.json").read_text())["metrics"]["mean_survival_ceiling_s"] == ceiling
     assert f"the mean survival can be at most {ceiling:.2f} s." in (validate / "report.md").read_text()
+    assert "## What ended the rollouts (fixed grid)" in (validate / "report.md").read_text()
     for name in ("report.md", "drift.png", "survival_per_start.png", "sim2sim.rrd"):
         assert (validate / name).stat().st_size > 0, name
     assert "| zero_action |" in (validate / "report.md").read_text()

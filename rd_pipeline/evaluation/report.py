@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections import Counter
 from pathlib import Path
 
 from rd_pipeline.evaluation.metrics import DRIFT_BINS, ERROR_METRICS, SUCCESS_THRESHOLDS_S
@@ -36,6 +37,7 @@ def write_markdown(report: dict, out_dir: Path) -> None:
     sections = [
         _title(report),
         _survival_table(report),
+        _endings_table(report),
         _tracking_table(report),
         _drift_table(report),
     ]
@@ -79,6 +81,21 @@ def _survival_table(report: dict) -> list[str]:
         "",
         f"A start can last at most what is left of the clip: the mean survival can be at most {ceiling:.2f} s.",
     ]
+    return lines
+
+
+def _endings_table(report: dict) -> list[str]:
+    lines = [
+        "## What ended the rollouts (fixed grid)",
+        "",
+        "| controller | failure at the last step: rollouts |",
+        "|---|---|",
+    ]
+    for name in CONTROLLERS:
+        ended = Counter(cause or "the clip's end" for cause in report["nominal"][name]["per_start"]["ended_by"])
+        counts = sorted(ended.items(), key=lambda item: (-item[1], item[0]))
+        lines.append(f"| {name} | " + ", ".join(f"{cause}: {count}" for cause, count in counts) + " |")
+    lines += ["", "`far B`: termination body B was the farthest from its reference, beyond the motion-far distance."]
     return lines
 
 

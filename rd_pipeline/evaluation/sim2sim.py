@@ -22,7 +22,7 @@ from rd_pipeline.policy_spec import PolicySpec
 from rd_pipeline.rl.env_config import Randomization
 from rd_pipeline.rl.physics import MujocoCpuBackend
 from rd_pipeline.rl.sim_model import randomized_copy
-from rd_pipeline.rl.terminations import bad_orientation, motion_far
+from rd_pipeline.rl.terminations import bad_orientation, motion_gap
 
 
 @dataclass(frozen=True)
@@ -42,6 +42,9 @@ class Rollout:
     start_frame: int
     steps: int
     completed: bool
+    ended_by: str
+    """What failed at its last step (`tilted`, `far <body>`, `floor <body>`, joined by ` + ` when
+    several did); empty when it reached the end of the reference."""
     remaining_steps: int
     """Control steps from the start to the end of the reference (the most it could survive)."""
     errors: dict[str, np.ndarray]
@@ -61,6 +64,7 @@ class _Checks:
     tracked_ref: np.ndarray
     termination: np.ndarray
     termination_ref: np.ndarray
+    termination_names: tuple[str, ...]
     root: int
     root_ref: int
     allowed: set[int]
@@ -99,7 +103,7 @@ def run_rollouts(
 
     last = reference.n_frames - 1
     alive = np.ones(count, dtype=bool)
-    terminated = np.zeros(count, dtype=bool)
+    ended_by = np.full(count, "", dtype=object)
     steps = np.zeros(count, dtype=np.int64)
     errors: list[dict[str, np.ndarray]] = []
     poses = [(state.body_pos[0].numpy().copy(), state.body_quat[0].numpy().copy())]
@@ -119,13 +123,13 @@ def run_rollouts(
         previous_pos = pos
         errors.append(_step_errors(checks, reference, frame, qpos, qvel, xpos, velocity))
         poses.append((xpos[0], xquat[0]))
-        off_reference = _off_reference(checks, reference, frame, xpos, xquat, protocol)
-        failed = off_reference | _touching(checks, models, physics.datas)
+        causes = _failures(checks, models, physics.datas, reference, frame, xpos, xquat, protocol)
+        failed = causes != ""
         steps += alive
-        terminated |= alive & failed
+        ended_by = np.where(alive & failed, causes, ended_by)
         alive &= ~failed & (frame < last)
         obs = controller.observe(qpos, qvel)
-    out = _rollouts(start_frames, steps, terminated, last, errors, poses)
+    out = _rollouts(start_frames, steps, ended_by, last, errors, poses)
     physics.close()
     return out
 
@@ -150,6 +154,7 @@ def _checks(
         tracked_ref=ref_body(bodies.tracked),
         termination=body_id(bodies.termination),
         termination_ref=ref_body(bodies.termination),
+        termination_names=bodies.termination,
         root=model.body(bodies.root).id,
         root_ref=reference.body_names.index(bodies.root),
         allowed=set(body_id(bodies.feet).tolist()) | {0},
@@ -212,37 +217,44 @@ def _step_errors(
     }
 
 
-def _off_reference(
+def _failures(
     checks: _Checks,
+    models: list[mujoco.MjModel],
+    datas: list[mujoco.MjData],
     reference: ReferenceMotion,
     frame: np.ndarray,
     xpos: np.ndarray,
     xquat: np.ndarray,
     protocol: Protocol,
 ) -> np.ndarray:
-    """(R,) the pelvis tilted or a termination body too far from the reference (the training terms)."""
+    """(R,) what fails this step, "" where nothing does (`Rollout.ended_by`): the pelvis tilted or
+    a termination body too far from the reference (the training terms), or a body other than the
+    feet touching the floor."""
     tilted = bad_orientation(
         torch.from_numpy(xquat[:, checks.root]),
         torch.from_numpy(reference.body_quat_w[frame, checks.root_ref]),
         protocol.orientation_limit_rad,
-    )
-    far = motion_far(
+    ).numpy()
+    gap = motion_gap(
         torch.from_numpy(xpos[:, checks.termination]),
         torch.from_numpy(reference.body_pos_w[frame][:, checks.termination_ref]),
-        protocol.motion_far_m,
-    )
-    return tilted.numpy() | far.numpy()
-
-
-def _touching(checks: _Checks, models: list[mujoco.MjModel], datas: list[mujoco.MjData]) -> np.ndarray:
-    """(R,) a body other than the feet touches the floor."""
-    return np.array([_bad_contact(m, d, checks.floor, checks.allowed) for m, d in zip(models, datas)])
+    ).numpy()
+    causes = []
+    for k, (model, data) in enumerate(zip(models, datas)):
+        found = ["tilted"] if tilted[k] else []
+        if gap[k].max() > protocol.motion_far_m:
+            found.append(f"far {checks.termination_names[int(gap[k].argmax())]}")
+        touching = _floor_contact(model, data, checks.floor, checks.allowed)
+        if touching is not None:
+            found.append(f"floor {touching}")
+        causes.append(" + ".join(found))
+    return np.array(causes, dtype=object)
 
 
 def _rollouts(
     start_frames: np.ndarray,
     steps: np.ndarray,
-    terminated: np.ndarray,
+    ended_by: np.ndarray,
     last: int,
     errors: list[dict[str, np.ndarray]],
     poses: list[tuple[np.ndarray, np.ndarray]],
@@ -255,7 +267,8 @@ def _rollouts(
             Rollout(
                 start_frame=int(start_frames[k]),
                 steps=n,
-                completed=not terminated[k],
+                completed=not ended_by[k],
+                ended_by=str(ended_by[k]),
                 remaining_steps=int(last - start_frames[k]),
                 errors={name: np.array([e[name][k] for e in errors[:n]]) for name in errors[0]},
                 body_pos=np.stack([p[0] for p in poses[: n + 1]]) if k == 0 else None,
@@ -265,15 +278,17 @@ def _rollouts(
     return out
 
 
-def _bad_contact(model: mujoco.MjModel, data: mujoco.MjData, floor: list[int], allowed: set[int]) -> bool:
+def _floor_contact(model: mujoco.MjModel, data: mujoco.MjData, floor: list[int], allowed: set[int]) -> str | None:
+    """The name of the first body touching the floor that may not, or None."""
     for i in range(data.ncon):
         first = data.contact.geom1[i]
         second = data.contact.geom2[i]
         if first in floor or second in floor:
             other = second if first in floor else first
-            if model.geom_bodyid[other] not in allowed:
-                return True
-    return False
+            body = int(model.geom_bodyid[other])
+            if body not in allowed:
+                return model.body(body).name
+    return None
 
 
 def randomized_models(

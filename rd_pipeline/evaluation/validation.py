@@ -19,7 +19,7 @@ from rd_pipeline.evaluation.report import CONTROLLERS
 from rd_pipeline.evaluation.sim2sim import BodySets, Rollout, randomized_models, run_rollouts
 from rd_pipeline.evaluation.validation_config import ValidationConfig
 from rd_pipeline.evaluation.validation_report import ValidationReport
-from rd_pipeline.motion.reference import ReferenceMotion
+from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.policy_runtime import Policy, load_runtimes
 from rd_pipeline.policy_spec import SPEC_FILE, PolicySpec, load_policy_spec
 from rd_pipeline.rl.sim_model import pd_simulation_model
@@ -51,6 +51,15 @@ class Validation:
 
     report: ValidationReport
     tracked: Rollout
+
+
+def reference_clip(spec: PolicySpec, stage: str, key: str, folder: Path) -> ReferenceClip:
+    """The frames of the reference artifact in `folder` (made by `stage`, key `key`) that the
+    exported policy of `spec` was trained on."""
+    start = spec.get("reference.start_frame")
+    end = spec.get("reference.end_frame")
+    motion = ReferenceMotion.load(folder / REFERENCE_FILE).frames(start, end)
+    return ReferenceClip(stage, key, motion, start, end)
 
 
 def load_exported_spec(folder: Path, reference_key: str) -> PolicySpec:
@@ -173,6 +182,7 @@ def _nominal_summary(rollouts: list[Rollout], control_hz: float, rng: np.random.
             "start_s": [r.start_frame / control_hz for r in rollouts],
             "survival_s": [r.steps / control_hz for r in rollouts],
             "most_s": [r.remaining_steps / control_hz for r in rollouts],
+            "ended_by": [r.ended_by for r in rollouts],
         },
     }
 

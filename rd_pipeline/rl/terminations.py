@@ -42,14 +42,19 @@ class TerminationsConfig:
     with the paper's terms."""
 
 
+def motion_gap(body_pos: torch.Tensor, ref_body_pos: torch.Tensor, height_only: bool = False) -> torch.Tensor:
+    """(N, B) how far each of the (N, B, 3) bodies is from its reference (with `height_only`,
+    above or below it)."""
+    offset = body_pos - ref_body_pos
+    return offset[..., 2].abs() if height_only else offset.norm(dim=-1)
+
+
 def motion_far(
     body_pos: torch.Tensor, ref_body_pos: torch.Tensor, limit_m: float, height_only: bool = False
 ) -> torch.Tensor:
     """(N,) True where any of the (N, B, 3) bodies is farther than `limit_m` from its reference
     (with `height_only`, above or below it)."""
-    offset = body_pos - ref_body_pos
-    gap = offset[..., 2].abs() if height_only else offset.norm(dim=-1)
-    return gap.max(dim=-1).values > limit_m
+    return motion_gap(body_pos, ref_body_pos, height_only).max(dim=-1).values > limit_m
 
 
 def bad_orientation(root_quat: torch.Tensor, ref_root_quat: torch.Tensor, limit_rad: float) -> torch.Tensor:
