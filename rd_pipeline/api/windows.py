@@ -11,11 +11,15 @@ reference, which no training param changes, so any plan of the take can make it.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from rich.console import Console
 
 from rd_pipeline.api import workspace
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.motion.activity import Window, window_at_speed_quantile
+
+if TYPE_CHECKING:
+    from rd_pipeline.motion.activity import Window
 
 
 def speed_window(
@@ -38,6 +42,8 @@ def speed_window(
         workspace.run(plan, until=maker, console=console)
     elif workspace.artifact(plan, maker) is None:
         raise PipelineError(f"window of {take}: chosen from the reference, which stage '{maker}' has not made yet")
+    from rd_pipeline.motion.activity import window_at_speed_quantile  # loads MuJoCo: only when a window is asked
+
     try:
         return window_at_speed_quantile(workspace.reference(plan), seconds, quantile)
     except ValueError as exc:
