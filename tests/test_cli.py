@@ -243,3 +243,15 @@ def test_help_to_a_reader_that_left_ends_quietly(monkeypatch: pytest.MonkeyPatch
     with os.fdopen(write, "w", buffering=1) as closed:  # each line reaches the pipe, as help does
         monkeypatch.setattr(sys, "stdout", closed)
         assert main(["run", "--help"]) == 0
+
+
+def test_a_window_beside_a_params_file_clip_is_refused(tmp_path: Path, artifacts: Path) -> None:
+    params = tmp_path / "params.yaml"
+    params.write_text('stages:\n  train:\n    clip: "3:14"\n')
+    result = cli("run", "--window", "10", "--params-file", str(params))
+    assert result.returncode == 2
+    assert (
+        result.stderr.strip().splitlines()[-1]
+        == "error: --window 10 and train.clip=3:14 both choose the clip: give one"
+    )
+    assert not artifacts.exists()

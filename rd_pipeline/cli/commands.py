@@ -51,9 +51,10 @@ def _plan(cmd: PlanOptions, console: Console, make_reference: bool) -> workspace
     planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
     if cmd.window is None:
         return planned
-    clips = [assignment for assignment in assignments if assignment.startswith("train.clip=")]
-    if clips:
-        raise PipelineError(f"--window {cmd.window} and {clips[0]} both choose the clip: give one")
+    trainer = workspace.providing(planned, "policy")
+    chosen = planned.pipeline.params[trainer].clip  # from --clip, --set or the params file
+    if chosen:
+        raise PipelineError(f"--window {cmd.window} and {trainer}.clip={chosen} both choose the clip: give one")
     window = windows.speed_window(planned, cmd.window, cmd.window_speed, make_reference, console)
     speed = f"joint speed p95 {window.joint_speed_p95:g} rad/s"
     console.print(escape(f"window: {window.clip} s at speed quantile {cmd.window_speed:g} ({speed})"), highlight=False)
