@@ -123,8 +123,10 @@ def _plan(args: argparse.Namespace, clip: str, iterations: int) -> workspace.Pla
 
 def _window_clip(args: argparse.Namespace) -> str:
     """The `--busiest`-second window of the whole take's reference at `--speed-quantile` of its
-    windows' joint speed (what `rd-pipeline run --window` chooses)."""
+    windows' joint speed (what `rd-pipeline run --window N --window-speed Q` chooses)."""
     whole = workspace.plan(args.robot, args.motion, args.profile, seed=args.seed)
+    windows.check_window(whole, args.busiest, args.speed_quantile)
+    workspace.run(whole, until=workspace.providing(whole, "reference"))
     window = windows.speed_window(whole, args.busiest, args.speed_quantile)
     print(
         f"{args.busiest} s window at speed quantile {args.speed_quantile:g}: {window.clip} s, "

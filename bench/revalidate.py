@@ -14,6 +14,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
@@ -31,16 +32,17 @@ def main() -> None:
     parser.add_argument("--out", type=Path, required=True, help="folder for report.json, report.md and plots")
     args = parser.parse_args()
     try:
-        revalidate(args.export, args.out)
-    except (PipelineError, OSError, KeyError) as exc:
+        revalidate(args.export.resolve(), args.out)
+    except (PipelineError, OSError) as exc:
         sys.exit(f"error: {args.export}: {exc}")
     print((args.out / REPORT_MD).read_text())
 
 
 def revalidate(export: Path, out: Path) -> None:
-    manifest = json.loads((export / MANIFEST).read_text())
+    """Validate the export artifact in `export` (an absolute path into a store) into `out`."""
+    manifest = _export_manifest(export)
     reference_key = manifest["metrics"]["reference_key"]
-    store = export.parents[3]
+    store = export.parents[3]  # <store>/export/<robot>/<motion>/<key>
     stage, folder = _reference(store, manifest["robot"], manifest["motion"], reference_key)
     spec = load_exported_spec(export, reference_key)
     clip = reference_clip(spec, stage, reference_key, folder)
@@ -51,6 +53,22 @@ def revalidate(export: Path, out: Path) -> None:
     write_json(report, out)
     write_markdown(report, out)
     plot_report(report, out)
+
+
+def _export_manifest(export: Path) -> dict[str, Any]:
+    """The export's manifest, or one line saying why it is not one."""
+    try:
+        manifest = json.loads((export / MANIFEST).read_text())
+    except json.JSONDecodeError as exc:
+        raise PipelineError(f"{MANIFEST} is not JSON ({exc})") from None
+    if not isinstance(manifest, dict) or manifest.get("stage") != "export" or len(export.parents) < 4:
+        raise PipelineError("not an export artifact's folder (<store>/export/<robot>/<motion>/<key>)")
+    for name in ("robot", "motion", "key"):
+        if name not in manifest:
+            raise PipelineError(f"{MANIFEST} lacks the field '{name}'")
+    if "reference_key" not in manifest.get("metrics", {}):
+        raise PipelineError(f"{MANIFEST} lacks the metric 'reference_key'")
+    return manifest
 
 
 def _reference(store: Path, robot: str, motion: str, key: str) -> tuple[str, Path]:

@@ -200,10 +200,12 @@ def test_window_trains_on_the_stretch_the_reference_speed_chooses(artifacts: Pat
     assert busiest.returncode == 0, busiest.stderr
     assert "window: 193:203 s at speed quantile 1 (joint speed p95 7.731 rad/s)" in busiest.stderr
     clipped = cli("plan", *take, "--clip", "193:203", "--json")
+    whole = cli("plan", *take, "--json")
     by_window = {row["stage"]: row["key"] for row in json.loads(busiest.stdout)}
     by_clip = {row["stage"]: row["key"] for row in json.loads(clipped.stdout)}
+    by_whole = {row["stage"]: row["key"] for row in json.loads(whole.stdout)}
     assert by_window == by_clip
-    assert by_window["train"] != by_window["export"]
+    assert by_window["import"] == by_whole["import"] and by_window["train"] != by_whole["train"]
 
 
 @pytest.mark.parametrize(
@@ -222,6 +224,19 @@ def test_window_trains_on_the_stretch_the_reference_speed_chooses(artifacts: Pat
             "error: window of g1/dance1_subject2: speed quantile 1.5 is outside [0, 1]",
         ),
         (("run", "--window", "0"), "error: window of g1/dance1_subject2: must last 1 s or more, got 0 s"),
+        (
+            ("run", "--window", "132"),
+            "error: window of g1/dance1_subject2: a 132 s window does not fit the 131.5 s take",
+        ),
+        (("run", "--window-speed", "1"), "error: --window-speed 1 chooses among windows: give --window too"),
+        (
+            ("run", "--window", "10", "--from", "train"),
+            "error: window of g1/dance1_subject2: chosen from the reference, which stage 'retarget' has not made yet",
+        ),
+        (
+            ("run", "--window", "10", "--only", "trian"),
+            "error: --only: unknown stage 'trian' (stages: parse, retarget, import, stats, prior, train, export, validate)",
+        ),
     ],
 )
 def test_a_window_that_cannot_be_chosen_is_one_line_before_any_stage(

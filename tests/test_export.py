@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -171,7 +172,12 @@ def test_smoke_profile_trains_exports_and_validates(robot: str, motion: str, art
     ceiling = report["nominal"]["policy"]["fixed_grid"]["mean_survival_ceiling_s"]
     assert json.loads((validate / "manifest.json").read_text())["metrics"]["mean_survival_ceiling_s"] == ceiling
     assert f"the mean survival can be at most {ceiling:.2f} s." in (validate / "report.md").read_text()
-    assert "## What ended the rollouts (fixed grid)" in (validate / "report.md").read_text()
+    markdown = (validate / "report.md").read_text()
+    for controller in ("policy", "zero_action"):  # the table counts what per_start says ended each rollout
+        ended = Counter(cause or "the clip's end" for cause in report["nominal"][controller]["per_start"]["ended_by"])
+        cells = ", ".join(f"{cause}: {count}" for cause, count in sorted(ended.items(), key=lambda c: (-c[1], c[0])))
+        assert f"| {controller} | {cells} |" in markdown
+    assert any(report["nominal"]["zero_action"]["per_start"]["ended_by"])  # zero action falls from some start
     for name in ("report.md", "drift.png", "survival_per_start.png", "sim2sim.rrd"):
         assert (validate / name).stat().st_size > 0, name
     assert "| zero_action |" in (validate / "report.md").read_text()

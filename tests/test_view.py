@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -50,7 +51,10 @@ def test_view_imported_robot_reference(artifacts: Path, tmp_path: Path) -> None:
     out = tmp_path / "h1.rrd"
     result = cli("view", "--robot", "h1", "--motion", "dance2_subject3", "--out", str(out))
     assert result.returncode == 0, result.stderr
-    assert "no validation of these params in the store: no tracked robot (profile smoke)" in result.stderr
+    planned = json.loads(cli("plan", "--robot", "h1", "--motion", "dance2_subject3", "--json").stdout)
+    validate = next(row["key"] for row in planned if row["stage"] == "validate")
+    said = " ".join(result.stderr.split())
+    assert f"no validation {validate} of these params in the store: no tracked robot (profile smoke;" in said
     rows = _rows_per_entity(out)
     plots = {name: rows.pop(name) for name in list(rows) if name.startswith("/quality/")}
     assert plots == {f"/quality/import/{name}": 11285 for name in ("penetration_m", "root_speed_m_s")}

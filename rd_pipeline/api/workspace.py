@@ -120,12 +120,12 @@ def _check_params(pipeline: Pipeline) -> None:
         )
     clip = params[trainer.name].clip
     if clip:
-        frames = round(_source_duration_s(pipeline) * fps)
+        frames = round(source_duration_s(pipeline) * fps)
         clip_frames(clip, fps, frames, warn=lambda message: None)  # the train stage says what it clamps
 
 
-def _source_duration_s(pipeline: Pipeline) -> float:
-    """The motion's length from its source file's header or line count."""
+def source_duration_s(pipeline: Pipeline) -> float:
+    """The motion's length from its source file's header or line count (no stage run)."""
     if pipeline.source == "bvh":
         return bvh_duration_s(paths.bvh_path(pipeline.motion))
     csv = paths.csv_path(pipeline.robot, pipeline.motion) if pipeline.robot else None

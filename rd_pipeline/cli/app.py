@@ -54,7 +54,9 @@ def main(argv: list[str] | None = None) -> int:
 
 def _reader_left() -> int:
     """The reader of stdout left: say nothing more, not even while Python flushes at exit."""
-    os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
     return 0
 
 

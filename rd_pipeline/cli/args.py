@@ -10,6 +10,8 @@ import tyro
 
 DEFAULT_ROBOT = "g1"
 DEFAULT_MOTION = "dance1_subject2"
+DEFAULT_WINDOW_SPEED = 0.5
+"""`--window` without `--window-speed`: the take's typical stretch, not its extreme."""
 
 
 @dataclass(frozen=True)
@@ -27,13 +29,13 @@ class PlanOptions:
     source: str | None = None
     """Force the motion source: `bvh` (parse + retarget) or `csv` (import)."""
     clip: str | None = None
-    """Train on part of the motion, `START:END` in seconds (sets train.clip)."""
+    """The part of the motion training uses, `START:END` in seconds (sets train.clip)."""
     window: int | None = None
-    """Train on a stretch of this many seconds chosen by the reference's joint speed (sets
+    """A stretch of this many seconds for training, chosen by the reference's joint speed (sets
     train.clip to it; see --window-speed)."""
-    window_speed: float = 0.5
+    window_speed: float | None = None
     """Which stretch --window takes: the one whose joint-speed p95 is nearest this quantile of the
-    take's (1: the busiest; 0.5: a typical stretch)."""
+    take's (1: the busiest; default 0.5: a typical stretch)."""
     backend: str | None = None
     """Physics backend for training, `rollout`, `cpu` or `warp` (sets train.env.backend)."""
     nproc: int | None = None

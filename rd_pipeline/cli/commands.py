@@ -18,6 +18,7 @@ from rd_pipeline.api import sweeps, windows, workspace
 from rd_pipeline.api.ablation import STUDIES, ablation_table, write_ablation
 from rd_pipeline.artifacts.runner import StageOutcome
 from rd_pipeline.cli.args import (
+    DEFAULT_WINDOW_SPEED,
     Ablate,
     ExportMotion,
     FetchLafan,
@@ -44,26 +45,50 @@ def _assignments(cmd: PlanOptions) -> tuple[str, ...]:
     return cmd.set + clip + backend + ranks
 
 
-def _plan(cmd: PlanOptions, console: Console, make_reference: bool) -> workspace.Plan:
-    """The plan of `cmd`; with `--window`, its clip is the window the take's reference chooses
-    (made first when `make_reference`)."""
+Selection = tuple[str | None, str | None, str | None]
+"""`--from`, `--until`, `--only`: the stages a run selects."""
+
+
+def _plan(cmd: PlanOptions, console: Console, selection: Selection | None) -> workspace.Plan:
+    """The plan of `cmd`; with `--window`, its clip is the window the take's reference chooses.
+    The reference is made first when the stages `selection` picks include the one that makes it
+    (`None`: make nothing); otherwise it must be in the store."""
     assignments = _assignments(cmd)
     planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
     if cmd.window is None:
+        if cmd.window_speed is not None:
+            raise PipelineError(f"--window-speed {cmd.window_speed:g} chooses among windows: give --window too")
         return planned
     trainer = workspace.providing(planned, "policy")
     chosen = planned.pipeline.params[trainer].clip  # from --clip, --set or the params file
     if chosen:
         raise PipelineError(f"--window {cmd.window} and {trainer}.clip={chosen} both choose the clip: give one")
-    window = windows.speed_window(planned, cmd.window, cmd.window_speed, make_reference, console)
+    quantile = DEFAULT_WINDOW_SPEED if cmd.window_speed is None else cmd.window_speed
+    windows.check_window(planned, cmd.window, quantile)
+    if selection is not None:
+        _make_reference(planned, selection, console)
+    window = windows.speed_window(planned, cmd.window, quantile)
     speed = f"joint speed p95 {window.joint_speed_p95:g} rad/s"
-    console.print(escape(f"window: {window.clip} s at speed quantile {cmd.window_speed:g} ({speed})"), highlight=False)
+    console.print(escape(f"window: {window.clip} s at speed quantile {quantile:g} ({speed})"), highlight=False)
     clipped = (*assignments, f"train.clip={window.clip}")
     return workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, clipped, cmd.seed, cmd.source)
 
 
+def _make_reference(planned: workspace.Plan, selection: Selection, console: Console) -> None:
+    """Run the selected stages up to the one that makes the reference, if it is among them."""
+    start, until, only = selection
+    selected, _ = planned.pipeline.select(start, until, only)
+    maker = workspace.providing(planned, "reference")
+    if maker not in {stage.name for stage in selected}:
+        return
+    if only is not None:
+        workspace.run(planned, only=only, console=console)
+    else:
+        workspace.run(planned, start=start, until=maker, console=console)
+
+
 def run(cmd: Run, console: Console) -> int:
-    plan = _plan(cmd, console, make_reference=True)
+    plan = _plan(cmd, console, (cmd.from_, cmd.until, cmd.only))
     source = plan.pipeline.source
     where = f"from {source}, profile {plan.profile}, artifacts in {plan.store.root}"
     console.print(escape(f"rd-pipeline: {cmd.robot}/{cmd.motion} {where}"))
@@ -81,7 +106,7 @@ def run(cmd: Run, console: Console) -> int:
 
 
 def plan(cmd: Plan, console: Console) -> int:
-    planned = _plan(cmd, console, make_reference=False)
+    planned = _plan(cmd, console, None)
     rows: list[dict[str, Any]] = [
         {
             "stage": entry.name,
@@ -205,7 +230,7 @@ def view(cmd: View, console: Console) -> int:
     from rd_pipeline.viz.recording import TRACKED_FILE, record_motion
     from rd_pipeline.viz.rerun_view import display_available
 
-    planned = _plan(cmd, console, make_reference=True)
+    planned = _plan(cmd, console, (None, None, None))
     # Only the stages that make motion are needed; they are computed or taken from the cache.
     until = workspace.providing(planned, "reference")
     outcomes = workspace.run(planned, until=until, console=console)
@@ -214,7 +239,9 @@ def view(cmd: View, console: Console) -> int:
     validated = workspace.artifact(planned, "validate")
     tracked = validated / TRACKED_FILE if validated else None
     if validated is None:
-        console.print(f"no validation of these params in the store: no tracked robot (profile {planned.profile})")
+        validate = planned.stage("validate").key
+        hint = f"no validation {validate} of these params in the store: no tracked robot (profile {planned.profile}; "
+        console.print(escape(hint + "`rd-pipeline run` with the same options makes it)"), highlight=False)
     out = cmd.out
     if out is None and not display_available():
         out = planned.store.root / "views" / f"{cmd.robot}_{cmd.motion}.rrd"

@@ -22,7 +22,7 @@ from rd_pipeline.policy_spec import PolicySpec
 from rd_pipeline.rl.env_config import Randomization
 from rd_pipeline.rl.physics import MujocoCpuBackend
 from rd_pipeline.rl.sim_model import randomized_copy
-from rd_pipeline.rl.terminations import bad_orientation, motion_gap
+from rd_pipeline.rl.terminations import bad_orientation, motion_far, motion_gap
 
 
 @dataclass(frozen=True)
@@ -235,15 +235,15 @@ def _failures(
         torch.from_numpy(reference.body_quat_w[frame, checks.root_ref]),
         protocol.orientation_limit_rad,
     ).numpy()
-    gap = motion_gap(
-        torch.from_numpy(xpos[:, checks.termination]),
-        torch.from_numpy(reference.body_pos_w[frame][:, checks.termination_ref]),
-    ).numpy()
+    body_pos = torch.from_numpy(xpos[:, checks.termination])
+    ref_body_pos = torch.from_numpy(reference.body_pos_w[frame][:, checks.termination_ref])
+    far = motion_far(body_pos, ref_body_pos, protocol.motion_far_m).numpy()
+    farthest = motion_gap(body_pos, ref_body_pos).argmax(dim=-1).numpy()
     causes = []
     for k, (model, data) in enumerate(zip(models, datas)):
         found = ["tilted"] if tilted[k] else []
-        if gap[k].max() > protocol.motion_far_m:
-            found.append(f"far {checks.termination_names[int(gap[k].argmax())]}")
+        if far[k]:
+            found.append(f"far {checks.termination_names[farthest[k]]}")
         touching = _floor_contact(model, data, checks.floor, checks.allowed)
         if touching is not None:
             found.append(f"floor {touching}")
@@ -287,7 +287,7 @@ def _floor_contact(model: mujoco.MjModel, data: mujoco.MjData, floor: list[int],
             other = second if first in floor else first
             body = int(model.geom_bodyid[other])
             if body not in allowed:
-                return model.body(body).name
+                return model.body(body).name or f"body {body}"
     return None
 
 
