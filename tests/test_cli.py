@@ -206,6 +206,19 @@ def test_window_trains_on_the_stretch_the_reference_speed_chooses(artifacts: Pat
     by_whole = {row["stage"]: row["key"] for row in json.loads(whole.stdout)}
     assert by_window == by_clip
     assert by_window["import"] == by_whole["import"] and by_window["train"] != by_whole["train"]
+    # status reports on the run the same options make: the window's import is cached, its train key is the clip's.
+    status = cli("status", *take, "--window", "10", "--window-speed", "1", "--json")
+    assert status.returncode == 0, status.stderr
+    (pipeline,) = json.loads(status.stdout)["pipelines"]
+    assert {row["stage"]: row["key"] for row in pipeline["stages"]} == by_clip
+    assert {row["stage"]: row["state"] for row in pipeline["stages"]} == {
+        "import": "cached",
+        "stats": "missing",
+        "prior": "missing",
+        "train": "missing",
+        "export": "missing",
+        "validate": "missing",
+    }
 
 
 @pytest.mark.parametrize(
@@ -229,6 +242,10 @@ def test_window_trains_on_the_stretch_the_reference_speed_chooses(artifacts: Pat
             "error: window of g1/dance1_subject2: a 132 s window does not fit the 131.5 s take",
         ),
         (("run", "--window-speed", "1"), "error: --window-speed 1 chooses among windows: give --window too"),
+        (
+            ("status", "--window", "10"),
+            "error: --window 10 is chosen from one take's reference: give --robot and --motion",
+        ),
         (
             ("run", "--window", "10", "--from", "train"),
             "error: window of g1/dance1_subject2: chosen from the reference, which stage 'retarget' has not made yet",

@@ -15,13 +15,19 @@ DEFAULT_WINDOW_SPEED = 0.5
 
 
 @dataclass(frozen=True)
-class PlanOptions:
-    """What determines a run's DAG: robot, motion, and the params every stage gets."""
+class Take:
+    """One robot and motion."""
 
     robot: str = DEFAULT_ROBOT
     """Robot (`rd-pipeline robots`)."""
     motion: str = DEFAULT_MOTION
     """Motion (`rd-pipeline motions`)."""
+
+
+@dataclass(frozen=True)
+class StageParams:
+    """What determines the params every stage of a take's DAG gets."""
+
     profile: str | None = None
     """Parameter profile: smoke, cpu or paper (default: the params file's, else smoke)."""
     seed: int = 0
@@ -44,6 +50,12 @@ class PlanOptions:
     """Parameter overrides, `stage.param=value`."""
     params_file: Path | None = None
     """A DVC-style params file (`params.yaml`) with a `stages:` table."""
+
+
+# A dataclass orders its fields from the last base to the first: the take comes first in --help.
+@dataclass(frozen=True)
+class PlanOptions(StageParams, Take):
+    """What determines a run's DAG: robot, motion, and the params every stage gets."""
 
 
 @dataclass(frozen=True)
@@ -99,25 +111,24 @@ class StageCommand:
 
 
 @dataclass(frozen=True)
-class Status:
-    """Per stage: key, path and whether it is cached, stale or missing."""
+class AnyTake:
+    """A robot, a motion, or every one in the store."""
 
     robot: str | None = None
     """Only this robot (default: every robot with artifacts)."""
     motion: str | None = None
     """Only this motion (default: every motion with artifacts)."""
-    profile: str | None = None
-    """Parameter profile the keys are computed for."""
+
+
+@dataclass(frozen=True)
+class Status(StageParams, AnyTake):
+    """Per stage: key, path and whether it is cached, stale or missing, for the params a run with
+    the same options would get."""
+
     json: bool = False
     """Print JSON instead of a table."""
     verify: bool = False
     """Check every file's sha256 against its manifest (file sizes are always checked)."""
-    source: str | None = None
-    """Force the motion source (`bvh` or `csv`)."""
-    set: tuple[str, ...] = ()
-    """Parameter overrides, `stage.param=value`."""
-    params_file: Path | None = None
-    """A DVC-style params file."""
 
 
 @dataclass(frozen=True)

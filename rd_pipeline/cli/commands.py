@@ -28,6 +28,7 @@ from rd_pipeline.cli.args import (
     Robots,
     Run,
     StageCommand,
+    StageParams,
     Status,
     Sweep,
     View,
@@ -37,7 +38,7 @@ from rd_pipeline.profiles import profile_note
 from rd_pipeline.robots.config import available_robots, load_robot_config
 
 
-def _assignments(cmd: PlanOptions) -> tuple[str, ...]:
+def _assignments(cmd: StageParams) -> tuple[str, ...]:
     """`--set` with the shorthands `--clip`, `--backend` and `--nproc` spelled out."""
     clip = (f"train.clip={cmd.clip}",) if cmd.clip else ()
     backend = (f"train.env.backend={cmd.backend}",) if cmd.backend else ()
@@ -53,8 +54,15 @@ def _plan(cmd: PlanOptions, console: Console, selection: Selection | None) -> wo
     """The plan of `cmd`; with `--window`, its clip is the window the take's reference chooses.
     The reference is made first when the stages `selection` picks include the one that makes it
     (`None`: make nothing); otherwise it must be in the store."""
+    return _take_plan(cmd, cmd.robot, cmd.motion, console, selection)
+
+
+def _take_plan(
+    cmd: StageParams, robot: str | None, motion: str, console: Console, selection: Selection | None
+) -> workspace.Plan:
+    """`_plan` for a take given apart from the params (`status` walks the takes in the store)."""
     assignments = _assignments(cmd)
-    planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
+    planned = workspace.plan(robot, motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
     if cmd.window is None:
         if cmd.window_speed is not None:
             raise PipelineError(f"--window-speed {cmd.window_speed:g} chooses among windows: give --window too")
@@ -71,7 +79,7 @@ def _plan(cmd: PlanOptions, console: Console, selection: Selection | None) -> wo
     speed = f"joint speed p95 {window.joint_speed_p95:g} rad/s"
     console.print(escape(f"window: {window.clip} s at speed quantile {quantile:g} ({speed})"), highlight=False)
     clipped = (*assignments, f"train.clip={window.clip}")
-    return workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, clipped, cmd.seed, cmd.source)
+    return workspace.plan(robot, motion, cmd.profile, cmd.params_file, clipped, cmd.seed, cmd.source)
 
 
 def _make_reference(planned: workspace.Plan, selection: Selection, console: Console) -> None:
@@ -188,8 +196,10 @@ def status(cmd: Status, console: Console) -> int:
     else:
         pairs = workspace.pairs_in_store(root, cmd.robot, cmd.motion)
     reports: list[dict[str, Any]] = []
+    if cmd.window is not None and not (cmd.robot and cmd.motion):
+        raise PipelineError(f"--window {cmd.window} is chosen from one take's reference: give --robot and --motion")
     for robot, motion in pairs:
-        planned = workspace.plan(robot, motion, cmd.profile, cmd.params_file, cmd.set, source=cmd.source)
+        planned = _take_plan(cmd, robot, motion, console, None)
         reports.append(
             {
                 "robot": robot,
