@@ -34,6 +34,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 from provenance import head_commit
 from training_hours import training_hours
+from validation_fields import fixed_grid_fields, validated_reference
 
 from rd_pipeline.api import windows, workspace
 from rd_pipeline.artifacts.store import MANIFEST
@@ -159,10 +160,6 @@ def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
     per_iteration = samples / params["iterations"]
     validation = ValidationReport.load(validate)
     details = validation.details
-    per_start = {name: details["nominal"][name]["per_start"] for name in ("policy", "zero_action")}
-    reference_clip = details["reference"]
-    reference = workspace.reference(plan, reference_clip["stage"])
-    clipped = reference.frames(reference_clip["start_frame"], reference_clip["end_frame"])
     return {
         "robot": plan.robot,
         "motion": plan.motion,
@@ -194,13 +191,8 @@ def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
         "profile": plan.profile,
         "train_key": manifest["key"],
         "export_key": details["policy_key"],
-        "fixed_grid_start_s": per_start["policy"]["start_s"],
-        "fixed_grid_survival_s": per_start["policy"]["survival_s"],
-        "fixed_grid_most_s": per_start["policy"]["most_s"],
-        "fixed_grid_zero_action_survival_s": per_start["zero_action"]["survival_s"],
-        "fixed_grid_ended_by": per_start["policy"]["ended_by"],
-        "fixed_grid_zero_action_ended_by": per_start["zero_action"]["ended_by"],
-        "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(clipped),
+        **fixed_grid_fields(validation),
+        "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(validated_reference(plan, validation)),
     }
 
 

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from provenance import head_commit
+from validation_fields import fixed_grid_fields, validated_reference
 
 from rd_pipeline.api import workspace
 from rd_pipeline.api.workspace import training_seconds, training_seconds_per_run
@@ -73,10 +74,6 @@ def _result(plan: workspace.Plan, args: argparse.Namespace) -> dict[str, Any]:
     trained = manifest["metrics"]
     validation = ValidationReport.load(validate)
     report = validation.details
-    clip = report["reference"]
-    # The reference the report validated against, whichever stage made it (retarget or import).
-    reference = workspace.reference(plan, clip["stage"]).frames(clip["start_frame"], clip["end_frame"])
-    per_start = {name: report["nominal"][name]["per_start"] for name in ("policy", "zero_action")}
     policy = report["nominal"]["policy"]
     params = manifest["params"]
     per_run = training_seconds_per_run(train)
@@ -84,7 +81,7 @@ def _result(plan: workspace.Plan, args: argparse.Namespace) -> dict[str, Any]:
         "robot": ROBOT,
         "motion": args.motion,
         "clip": args.clip,
-        "clip_s": clip["duration_s"],
+        "clip_s": report["reference"]["duration_s"],
         "start_zero_s": validation.start_zero_survival_s,
         "completion_pct": validation.completion_pct,
         "mean_survival_s": validation.mean_survival_s,
@@ -111,13 +108,8 @@ def _result(plan: workspace.Plan, args: argparse.Namespace) -> dict[str, Any]:
             row["iteration"]: row["start_zero_s"] for row in read_training_log(train) if "start_zero_s" in row
         },
         "export_key": report["policy_key"],
-        "fixed_grid_start_s": per_start["policy"]["start_s"],
-        "fixed_grid_survival_s": per_start["policy"]["survival_s"],
-        "fixed_grid_most_s": per_start["policy"]["most_s"],
-        "fixed_grid_zero_action_survival_s": per_start["zero_action"]["survival_s"],
-        "fixed_grid_ended_by": per_start["policy"]["ended_by"],
-        "fixed_grid_zero_action_ended_by": per_start["zero_action"]["ended_by"],
-        "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(reference),
+        **fixed_grid_fields(validation),
+        "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(validated_reference(plan, validation)),
     }
 
 
