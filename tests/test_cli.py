@@ -176,6 +176,10 @@ def test_a_control_rate_off_the_reference_fps_is_refused_before_any_stage(artifa
     [
         (("stage", "train", "--motion", "dance1_subject2"), "error: stage 'train' needs --robot"),
         (
+            ("stage", "parse", "--motion", "dance1_subject2", "--source", "csv"),
+            "error: stage 'parse' reads the bvh source, not --source csv",
+        ),
+        (
             ("run", "--only", "train", "--until", "export"),
             "error: --only runs one stage; it cannot be combined with --until",
         ),
@@ -219,6 +223,15 @@ def test_window_trains_on_the_stretch_the_reference_speed_chooses(artifacts: Pat
         "export": "missing",
         "validate": "missing",
     }
+    # stage takes the same options: one training iteration on the busiest window lands under the clip's key.
+    for upstream in ("stats", "prior"):
+        assert cli("stage", upstream, *take).returncode == 0
+    one = ("--set", "train.iterations=1")
+    trained = cli("stage", "train", *take, "--window", "10", "--window-speed", "1", *one)
+    assert trained.returncode == 0, trained.stderr
+    clipped_one = cli("plan", *take, "--clip", "193:203", *one, "--json")
+    key = {row["stage"]: row["key"] for row in json.loads(clipped_one.stdout)}["train"]
+    assert (artifacts / "train" / "h1_2" / "dance2_subject4" / key / "manifest.json").is_file()
 
 
 @pytest.mark.parametrize(

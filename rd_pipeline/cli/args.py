@@ -85,9 +85,10 @@ class Plan(PlanOptions):
     """Print a JSON list of `{"stage", "key", "cached", "params"}` instead of a table."""
 
 
-@dataclass(frozen=True)
-class StageCommand:
-    """Run one stage (what `dvc.yaml` calls); its upstream artifacts must exist."""
+@dataclass(frozen=True, kw_only=True)
+class StageCommand(StageParams):
+    """Run one stage (what `dvc.yaml` calls); its upstream artifacts must exist. The options that
+    set a run's params (profile, clip, window, set, ...) set this stage's as they would the run's."""
 
     name: tyro.conf.Positional[str]
     """Stage name."""
@@ -95,19 +96,11 @@ class StageCommand:
     """Motion."""
     robot: str | None = None
     """Robot (not needed for robot-independent stages such as parse)."""
-    profile: str | None = None
-    """Parameter profile (default: the params file's, else smoke)."""
     force: bool = False
     """Recompute even when cached."""
     resume: bool = False
     """Grow a finished training that differs only in fewer iterations (an interrupted training
     continues from its checkpoints without it)."""
-    seed: int = 0
-    """Seed for stages that draw random numbers."""
-    set: tuple[str, ...] = ()
-    """Parameter overrides, `stage.param=value`."""
-    params_file: Path | None = None
-    """A DVC-style params file (`params.yaml`)."""
 
 
 @dataclass(frozen=True)

@@ -176,7 +176,11 @@ def stage(cmd: StageCommand, console: Console) -> int:
     chosen = workspace.registered_stage(cmd.name)
     if chosen.per_robot and cmd.robot is None:
         raise PipelineError(f"stage '{cmd.name}' needs --robot")
-    planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, cmd.params_file, cmd.set, cmd.seed, chosen.source)
+    if cmd.source and chosen.source and cmd.source != chosen.source:
+        raise PipelineError(f"stage '{cmd.name}' reads the {chosen.source} source, not --source {cmd.source}")
+    # A head stage picks its source: `stage import` for a take that also has a BVH.
+    sourced = dataclasses.replace(cmd, source=cmd.source or chosen.source)
+    planned = _take_plan(sourced, cmd.robot, cmd.motion, console, (None, None, cmd.name))
     workspace.run(
         planned,
         only=cmd.name,
