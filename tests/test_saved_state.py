@@ -1,5 +1,6 @@
 """A training restored from a saved state (`bench/dance_window_state.py`) carries its whole log but
-holds only the checkpoints saved since; train and export choose among the checkpoints it holds."""
+holds only the checkpoints saved since; train and export choose among the checkpoints it holds. A
+fork of a longer run finishes as the shorter run without training."""
 
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ def _plan(iterations: int) -> workspace.Plan:
     return workspace.plan(ROBOT, MOTION, "smoke", overrides=overrides, seed=0)
 
 
-def _state(action: str, iterations: int, state: Path) -> subprocess.CompletedProcess:
+def _state(action: str, iterations: int, state: Path, *extra: str) -> subprocess.CompletedProcess:
     script = str(PROJECT / "bench" / "dance_window_state.py")
     args = [
         action,
@@ -42,6 +43,7 @@ def _state(action: str, iterations: int, state: Path) -> subprocess.CompletedPro
         *SETS,
         "--state",
         str(state),
+        *extra,
     ]
     return subprocess.run([sys.executable, script, *args], capture_output=True, text=True, cwd=PROJECT)
 
@@ -78,3 +80,26 @@ def test_a_restored_run_chooses_among_the_checkpoints_it_holds(artifacts: Path, 
     best = max(scores, key=lambda it: (*scores[it], it))
     assert _manifest(grown, "train")["metrics"]["best_checkpoint"] == best
     assert _manifest(grown, "export")["metrics"]["checkpoint_iteration"] == best
+
+
+@pytest.mark.slow
+def test_a_fork_finishes_a_stage_of_a_longer_run_without_training(artifacts: Path, tmp_path: Path) -> None:
+    longer = _plan(4)
+    workspace.run(longer, until="train")
+    forked = _state("fork", 4, tmp_path, "--at", "2")
+    assert forked.returncode == 0, forked.stderr
+    stage = _plan(2)
+    workspace.run(stage, until="train")
+    train = stage.store.find("train", ROBOT, MOTION, stage.stage("train").key)
+    source = longer.store.find("train", ROBOT, MOTION, longer.stage("train").key)
+    assert train is not None and source is not None
+    # Its rows are the longer run's, seconds included: nothing was trained again.
+    assert read_training_log(train.path) == read_training_log(source.path)[:2]
+    held = checkpoints_by_iteration(train.path)
+    assert list(held) == [1, 2]
+    assert held[2].samefile(checkpoints_by_iteration(source.path)[2])
+    again = _state("fork", 4, tmp_path, "--at", "2")
+    assert again.returncode == 1
+    assert again.stderr.strip() == f"error: train {train.key} (2 iterations) is finished already"
+    missing = _state("fork", 4, tmp_path, "--at", "5")
+    assert missing.stderr.strip() == f"error: train {source.key} holds no checkpoint 5 in {source.path}"
