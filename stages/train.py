@@ -32,7 +32,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     outcome = _train(ctx, job)
     rows = _into_artifact(work, ctx.out_dir)
     # The last iteration is always a scored checkpoint, so there is a best one.
-    best = best_held(ctx.out_dir)
+    best = best_held(ctx.out_dir, rows=rows)
     assert best is not None
     _plot(rows, best, outcome, ctx.out_dir)
     return {

@@ -60,9 +60,10 @@ def best_scored(rows: list[dict], first: ScoreFirst = "start_zero") -> dict | No
     return max(scored, key=lambda row: (*(row[name] for name in order), row["iteration"]), default=None)
 
 
-def best_held(folder: Path, first: ScoreFirst = "start_zero") -> dict | None:
+def best_held(folder: Path, first: ScoreFirst = "start_zero", rows: list[dict] | None = None) -> dict | None:
     """The log row of the best-scored checkpoint among those the folder holds (see `best_scored`):
     a run grown from a saved state logs the whole training but holds only the checkpoints saved
-    since."""
+    since. `rows`: the folder's log, when the caller has read it already."""
     held = checkpoints_by_iteration(folder)
-    return best_scored([row for row in read_training_log(folder) if row["iteration"] in held], first)
+    logged = read_training_log(folder) if rows is None else rows
+    return best_scored([row for row in logged if row["iteration"] in held], first)
