@@ -16,13 +16,15 @@ Unless `--until train`, writes `<out>` with the exported checkpoint's figures on
 model (`validate`), every scored checkpoint's training-model start-zero survival against samples,
 the survival from each fixed-grid start beside zero action's and the most it could be (to the
 window's end; their mean is `mean_survival_ceiling_s`), the options trained with, and
-`<out stem>_curve.png` (start-zero against samples on a log axis; per-start survival).
+`<out stem>_curve.png` (start-zero against samples on a log axis; per-start survival) and
+`<out stem>_sampler_profile.png` (the train stage's plot of the sampler's last failure rates).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import statistics
 import sys
 from pathlib import Path
@@ -42,6 +44,7 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.validation_report import ValidationReport
 from rd_pipeline.motion.activity import joint_speed_p95_per_second
 from rd_pipeline.rl.training_log import read_training_log
+from rd_pipeline.stages.train import PROFILE_FILE
 
 OPTIONS = {
     "backend": ("env", "backend"),
@@ -78,6 +81,9 @@ def main() -> None:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     _plot(result, args.out.with_name(f"{args.out.stem}_curve.png"))
+    # The sampler's last failure rates and probabilities, as the train stage drew them.
+    train = workspace.required_artifact(plan, "train")
+    shutil.copyfile(train / PROFILE_FILE, args.out.with_name(f"{args.out.stem}_sampler_profile.png"))
     headline = {key: value for key, value in result.items() if not isinstance(value, (list, dict))}
     print(json.dumps(headline, indent=2))
 
