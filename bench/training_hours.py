@@ -20,7 +20,7 @@ from typing import Any
 
 from provenance import head_commit
 
-from rd_pipeline.api.workspace import training_log, training_seconds_per_run
+from rd_pipeline.api.workspace import training_log, training_seconds, training_seconds_per_run
 from rd_pipeline.errors import PipelineError
 
 
@@ -32,7 +32,7 @@ def training_hours(train: Path) -> dict[str, Any]:
     if not seconds:
         raise ValueError(f"{train}: its training log has no iterations")
     return {
-        "wall_h": round(sum(seconds) / 3600, 3),
+        "wall_h": round(training_seconds(train) / 3600, 3),
         "wall_h_at_median_iteration": round(len(seconds) * statistics.median(seconds) / 3600, 3),
         "wall_h_per_run": {key: round(run_seconds / 3600, 3) for key, run_seconds in per_run.items()},
     }

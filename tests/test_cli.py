@@ -224,6 +224,12 @@ def test_window_trains_on_the_stretch_the_reference_speed_chooses(artifacts: Pat
         "validate": "missing",
     }
     # stage takes the same options: one training iteration on the busiest window lands under the clip's key.
+    early = cli("stage", "train", *take, "--window", "10", "--window-speed", "1")
+    assert early.returncode == 2
+    assert early.stderr.strip().splitlines()[-1] == (
+        f"error: upstream stage 'stats' has no usable artifact {by_clip['stats']} for h1_2/dance2_subject4; "
+        "make it first: `rd-pipeline stage stats` with the same options, or a run through it"
+    )
     for upstream in ("stats", "prior"):
         assert cli("stage", upstream, *take).returncode == 0
     one = ("--set", "train.iterations=1")

@@ -191,7 +191,7 @@ def execute(
             if existing is None:
                 raise PipelineError(
                     f"upstream stage '{stage.name}' has no usable artifact {entry.key} for {label}; "
-                    f"run it first (drop --from/--only)"
+                    f"make it first: `rd-pipeline stage {stage.name}` with the same options, or a run through it"
                 )
             refs[stage.provides] = existing
             continue

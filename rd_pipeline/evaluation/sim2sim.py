@@ -22,7 +22,7 @@ from rd_pipeline.policy_spec import PolicySpec
 from rd_pipeline.rl.env_config import Randomization
 from rd_pipeline.rl.physics import MujocoCpuBackend
 from rd_pipeline.rl.sim_model import randomized_copy
-from rd_pipeline.rl.terminations import bad_orientation, motion_far, motion_gap
+from rd_pipeline.rl.terminations import bad_orientation, motion_gap
 
 
 @dataclass(frozen=True)
@@ -237,8 +237,9 @@ def _failures(
     ).numpy()
     body_pos = torch.from_numpy(xpos[:, checks.termination])
     ref_body_pos = torch.from_numpy(reference.body_pos_w[frame][:, checks.termination_ref])
-    far = motion_far(body_pos, ref_body_pos, protocol.motion_far_m).numpy()
-    farthest = motion_gap(body_pos, ref_body_pos).argmax(dim=-1).numpy()
+    gap = motion_gap(body_pos, ref_body_pos).max(dim=-1)
+    far = (gap.values > protocol.motion_far_m).numpy()
+    farthest = gap.indices.numpy()
     causes = []
     for k, (model, data) in enumerate(zip(models, datas)):
         found = ["tilted"] if tilted[k] else []
