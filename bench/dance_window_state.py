@@ -115,13 +115,19 @@ def _fork(plan: workspace.Plan, key: str, work: Path, stage: workspace.Plan) -> 
     into = stage.store.work_folder("train", stage.robot, stage.motion, stage_key)
     if checkpoints_by_iteration(into):
         raise ValueError(f"{into} already holds checkpoints: finish it as it is")
-    (into / CHECKPOINT_DIR).mkdir(parents=True, exist_ok=True)
+    # Filled beside its name and renamed, so a fork that fails partway leaves no half-filled run.
+    filling = into.with_name(f"{into.name}.forking")
+    shutil.rmtree(filling, ignore_errors=True)
+    (filling / CHECKPOINT_DIR).mkdir(parents=True)
     for path in held.values():
-        os.link(path, into / CHECKPOINT_DIR / path.name)
+        os.link(path, filling / CHECKPOINT_DIR / path.name)
     if (folder / CONTINUED_FILE).is_file():
-        shutil.copy2(folder / CONTINUED_FILE, into / CONTINUED_FILE)
+        shutil.copy2(folder / CONTINUED_FILE, filling / CONTINUED_FILE)
     lines = (folder / LOG_FILE).read_text().splitlines(keepends=True)
-    (into / LOG_FILE).write_text("".join(line for line in lines if json.loads(line)["iteration"] <= at))
+    (filling / LOG_FILE).write_text("".join(line for line in lines if json.loads(line)["iteration"] <= at))
+    # What a work folder without checkpoints holds is a start that trained nothing to keep.
+    shutil.rmtree(into, ignore_errors=True)
+    filling.rename(into)
     print(f"forked train {key} at {at} ({len(held)} checkpoints) into {into}")
 
 

@@ -86,9 +86,15 @@ def test_a_restored_run_chooses_among_the_checkpoints_it_holds(artifacts: Path, 
 def test_a_fork_finishes_a_stage_of_a_longer_run_without_training(artifacts: Path, tmp_path: Path) -> None:
     longer = _plan(4)
     workspace.run(longer, until="train")
+    stage = _plan(2)
+    # What a fork that failed partway leaves beside the work folder, and a start that trained nothing.
+    into = stage.store.work_folder("train", ROBOT, MOTION, stage.stage("train").key)
+    (into.with_name(f"{into.name}.forking") / "checkpoints").mkdir(parents=True)
+    into.mkdir()
+    (into / "training_log.jsonl").write_text("")
     forked = _state("fork", 4, tmp_path, "--at", "2")
     assert forked.returncode == 0, forked.stderr
-    stage = _plan(2)
+    assert sorted(path.name for path in into.parent.iterdir() if path.name.startswith(into.name)) == [into.name]
     workspace.run(stage, until="train")
     train = stage.store.find("train", ROBOT, MOTION, stage.stage("train").key)
     source = longer.store.find("train", ROBOT, MOTION, longer.stage("train").key)
