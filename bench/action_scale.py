@@ -1,0 +1,141 @@
+"""Benchmark: from which starts a trained policy helps, as survival with its outputs scaled.
+
+    python bench/action_scale.py --robot h1_2 --motion dance2_subject4 --clip 107:117 --iterations 16000
+        [--checkpoint 11400] [--set ...] [--scales 1 0.5 0.25 0] [--starts 10] [--out bench/results/action_scale_h1_2]
+        [--commit SHA]
+
+Loads a checkpoint of the finished `train` artifact of that plan (its last one by default) and
+rolls out its mean outputs, multiplied by each scale, from `--starts` evenly spaced frames on the
+nominal training model (primitive collision, training terminations, no randomization). Scale 0 is
+zero output: under `selective` the residual joints track the reference and the rest hold the
+default pose. Where a smaller scale survives longer, the policy's own outputs end the rollout.
+Writes `<out>.json` and `<out>.md`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from provenance import head_commit
+
+from rd_pipeline.api import workspace
+from rd_pipeline.errors import PipelineError
+from rd_pipeline.rl.evaluate import scoring_starts, survival
+from rd_pipeline.rl.runner import Segments, TrainingJob, TrainingRunner, clip_segments
+from rd_pipeline.rl.trainer import load_checkpoint
+from rd_pipeline.rl.training_config import clip_frames
+from rd_pipeline.robots import load_robot
+from rd_pipeline.sampling.prior import PRIOR_FILE
+
+
+def main() -> None:
+    args = _parser().parse_args()
+    try:
+        result = _measure(args)
+    except (PipelineError, ValueError, OSError) as exc:
+        sys.exit(f"error: {exc}")
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
+    args.out.with_suffix(".md").write_text(_table(result))
+    print(_table(result))
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--robot", default="g1")
+    parser.add_argument("--motion", default="dance1_subject2")
+    parser.add_argument("--clip", default="11:21")
+    parser.add_argument("--profile", default="cpu")
+    parser.add_argument("--iterations", type=int, required=True)
+    parser.add_argument("--checkpoint", type=int, default=None, help="its iteration (default: the last)")
+    parser.add_argument("--set", nargs="*", default=[], help="further overrides, as the run had them")
+    parser.add_argument("--scales", type=float, nargs="+", default=[1.0, 0.5, 0.25, 0.0])
+    parser.add_argument("--starts", type=int, default=10)
+    parser.add_argument(
+        "--commit", default=None, help="the commit of the installed code that runs this (default: HEAD)"
+    )
+    parser.add_argument("--out", type=Path, default=Path("bench/results/action_scale"))
+    return parser
+
+
+def _measure(args: argparse.Namespace) -> dict[str, Any]:
+    sets = (f"train.clip={args.clip}", f"train.iterations={args.iterations}", *args.set)
+    plan = workspace.plan(args.robot, args.motion, args.profile, overrides=sets)
+    train = workspace.required_artifact(plan, "train")
+    held = workspace.training_checkpoints(train)
+    iteration = args.checkpoint if args.checkpoint is not None else max(held)
+    if iteration not in held:
+        raise ValueError(f"{train} holds no checkpoint {iteration}")
+    runner = _runner(plan, args.starts)
+    load_checkpoint(held[iteration], runner.ppo, runner.env)
+    env = runner.scoring_env
+    assert env is not None
+    fresh = env.state_dict()
+    starts = scoring_starts(env.max_episode_length, env.num_envs)
+    survival_s = {}
+    for scale in args.scales:
+        env.load_state_dict(fresh)
+        seconds = _survival(runner, starts, scale)
+        survival_s[str(scale)] = [round(float(value), 2) for value in seconds]
+    return {
+        "robot": args.robot,
+        "motion": args.motion,
+        "clip": args.clip,
+        "train_key": train.name,
+        "checkpoint": iteration,
+        "commit": args.commit or head_commit(),
+        "start_s": [round(float(frame) / env.control_hz, 2) for frame in starts],
+        "survival_s": survival_s,
+    }
+
+
+def _runner(plan: workspace.Plan, starts: int) -> TrainingRunner:
+    """The training's runner, whose nominal scoring environment has one world per start."""
+    config = dataclasses.replace(plan.pipeline.params["train"], scoring_starts=starts)
+    reference = workspace.reference(plan)
+    with np.load(workspace.required_artifact(plan, "prior") / PRIOR_FILE) as prior:
+        segments = Segments(prior["starts"], prior["lengths"], prior["weights"])
+    start, end = clip_frames(config.clip, reference.fps, reference.n_frames)
+    job = TrainingJob(
+        load_robot(plan.robot),
+        reference.frames(start, end),
+        clip_segments(segments, start, end),
+        config,
+        Path("unused"),
+        None,
+    )
+    return TrainingRunner(job)
+
+
+def _survival(runner: TrainingRunner, starts: torch.Tensor, scale: float) -> torch.Tensor:
+    """Seconds survived from each start with the policy's mean outputs times `scale`."""
+    policy = lambda obs: runner.ppo.actor(obs, stochastic_output=False) * scale
+    env = runner.scoring_env
+    assert env is not None
+    return survival(env, policy, starts)
+
+
+def _table(result: dict[str, Any]) -> str:
+    scales = list(result["survival_s"])
+    lines = [
+        f"# {result['robot']} {result['motion']} {result['clip']} s, checkpoint {result['checkpoint']} "
+        f"(train {result['train_key']}): seconds survived per start on the nominal training model",
+        "",
+        "| start (s) | " + " | ".join(f"outputs x {scale}" for scale in scales) + " |",
+        "|---|" + "---|" * len(scales),
+    ]
+    for k, start in enumerate(result["start_s"]):
+        cells = [f"{result['survival_s'][scale][k]:.2f}" for scale in scales]
+        lines.append(f"| {start:.2f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,57 @@
+"""`bench/action_scale.py` rolls a trained checkpoint out with its outputs scaled: at scale 1 from
+start 0 it survives exactly as long as the training scored that checkpoint, and a checkpoint
+whose outputs are pushed far off ends sooner at scale 1 than at scale 0."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+from conftest import PROJECT
+
+from rd_pipeline.api import workspace
+from rd_pipeline.rl.training_log import read_training_log
+
+SETS = ("train.checkpoint_every=1",)
+CLIP = "11:13"
+
+
+def _scale(out: Path, *extra: str) -> subprocess.CompletedProcess:
+    script = str(PROJECT / "bench" / "action_scale.py")
+    args = ["--profile", "smoke", "--clip", CLIP, "--iterations", "2", "--set", *SETS, "--out", str(out), *extra]
+    return subprocess.run([sys.executable, script, *args], capture_output=True, text=True, cwd=PROJECT)
+
+
+def _survival(out: Path, checkpoint: int) -> dict[str, list[float]]:
+    measured = _scale(out, "--checkpoint", str(checkpoint), "--scales", "1", "0", "--starts", "4")
+    assert measured.returncode == 0, measured.stderr
+    result = json.loads(out.with_suffix(".json").read_text())
+    assert result["checkpoint"] == checkpoint
+    assert result["start_s"] == [0.0, 0.5, 1.0, 1.5]
+    return result["survival_s"]
+
+
+@pytest.mark.slow
+def test_scaled_outputs_reproduce_the_logged_score_and_see_a_harmful_policy(artifacts: Path, tmp_path: Path) -> None:
+    overrides = (f"train.clip={CLIP}", "train.iterations=2", *SETS)
+    plan = workspace.plan("g1", "dance1_subject2", "smoke", overrides=overrides)
+    workspace.run(plan, until="train")
+    train = workspace.required_artifact(plan, "train")
+    logged = {row["iteration"]: row["start_zero_s"] for row in read_training_log(train)}
+    trained = _survival(tmp_path / "trained", 1)
+    assert trained["1.0"][0] == logged[1]
+    # Checkpoint 2's outputs pushed 8 action units off (2 rad on a joint at scale 0.25).
+    path = workspace.training_checkpoints(train)[2]
+    state = torch.load(path, weights_only=False)
+    state["algorithm"]["actor_state_dict"]["mlp.6.bias"] += 8.0
+    torch.save(state, path)
+    harmful = _survival(tmp_path / "harmful", 2)
+    assert harmful["0.0"] == trained["0.0"]  # zero outputs, whatever the weights
+    assert all(bad < zero for bad, zero in zip(harmful["1.0"], harmful["0.0"]))
+    missing = _scale(tmp_path / "missing", "--checkpoint", "3")
+    assert missing.returncode == 1
+    assert missing.stderr.strip() == f"error: {train} holds no checkpoint 3"
