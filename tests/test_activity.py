@@ -4,12 +4,7 @@ import numpy as np
 import pytest
 from conftest import h1_2_dance_reference
 
-from rd_pipeline.motion.activity import (
-    busiest_window,
-    joint_speed_p95_per_second,
-    speed_windows,
-    window_at_speed_quantile,
-)
+from rd_pipeline.motion.activity import joint_speed_p95_per_second, speed_windows, window_at_speed_quantile
 
 
 @pytest.fixture(scope="module")
@@ -26,8 +21,8 @@ def test_per_second_speed_sees_the_standing_start_and_end(reference):
     assert np.median(per_second) > 4.0
 
 
-def test_busiest_window_is_the_fastest_ten_seconds(reference):
-    window = busiest_window(reference, 10)
+def test_the_top_speed_quantile_is_the_fastest_ten_seconds(reference):
+    window = window_at_speed_quantile(reference, 10, 1.0)
     assert (window.start_s, window.end_s, window.clip) == (193, 203, "193:203")
     frames = np.abs(reference.joint_vel[193 * 50 : 203 * 50])
     assert window.joint_speed_p95 == pytest.approx(np.percentile(frames, 95), abs=1e-3)
@@ -37,7 +32,7 @@ def test_busiest_window_is_the_fastest_ten_seconds(reference):
 
 def test_a_window_longer_than_the_take_is_refused(reference):
     with pytest.raises(ValueError, match=r"^a 300 s window does not fit a 225.7 s reference$"):
-        busiest_window(reference, 300)
+        speed_windows(reference, 300)
 
 
 def test_the_median_speed_window_is_a_typical_stretch_of_dance(reference):
@@ -50,7 +45,7 @@ def test_the_median_speed_window_is_a_typical_stretch_of_dance(reference):
     assert abs(typical.joint_speed_p95 - np.median(speeds)) == pytest.approx(np.abs(speeds - np.median(speeds)).min())
     assert np.percentile(speeds, 40) < typical.joint_speed_p95 < np.percentile(speeds, 60)
     assert 20 < typical.start_s < 190
-    assert window_at_speed_quantile(reference, 10, 1.0) == busiest_window(reference, 10)
+    assert window_at_speed_quantile(reference, 10, 1.0) == max(windows, key=lambda w: w.joint_speed_p95)
     assert window_at_speed_quantile(reference, 10, 0.0).joint_speed_p95 == speeds.min()
     with pytest.raises(ValueError, match=r"^speed quantile 1.5 is outside \[0, 1\]$"):
         window_at_speed_quantile(reference, 10, 1.5)

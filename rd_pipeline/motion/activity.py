@@ -56,11 +56,6 @@ def speed_windows(reference: ReferenceMotion, seconds: int) -> list[Window]:
     return windows
 
 
-def busiest_window(reference: ReferenceMotion, seconds: int) -> Window:
-    """The `seconds`-long window whose joint-speed p95 is the highest (the earliest of ties)."""
-    return window_at_speed_quantile(reference, seconds, 1.0)
-
-
 def window_at_speed_quantile(reference: ReferenceMotion, seconds: int, quantile: float) -> Window:
     """The `seconds`-long window whose joint-speed p95 is nearest that `quantile` of all the take's
     windows (1: the busiest; 0.5: a typical stretch of the take), the earliest of ties."""

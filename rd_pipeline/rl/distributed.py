@@ -80,15 +80,6 @@ def gather_to_leader(ranks: Ranks, value: Any) -> list[Any]:
     return gathered
 
 
-def from_leader(ranks: Ranks, value: Any) -> Any:
-    """Rank 0's `value` on every rank."""
-    if not ranks.distributed:
-        return value
-    box = [value]
-    dist.broadcast_object_list(box, src=0)
-    return box[0]
-
-
 def summed(ranks: Ranks, values: list[float]) -> list[float]:
     """`values` summed over the ranks (float64, so counts stay exact)."""
     if not ranks.distributed:
