@@ -114,7 +114,7 @@ def _longest_shorter_run(runs: tuple[ArtifactRef, ...], iterations: int) -> Shor
 
 STAGE = Stage(
     name="train",
-    version=5,
+    version=6,
     description="reference + prior -> residual-action PPO policy (multi-head critic, segment sampler)",
     params=TrainConfig,
     provides="policy",

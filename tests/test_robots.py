@@ -85,11 +85,18 @@ def _broken_config(tmp_path: Path, name: str, old: str, new: str) -> Path:
 
 
 def test_missing_body_is_named(tmp_path: Path) -> None:
-    path = _broken_config(tmp_path, "g1", 'feet = ["left_ankle_roll_link"', 'feet = ["left_foot_link"')
+    path = _broken_config(tmp_path, "g1", '"left_hip_roll_link", "left_knee_link"', '"left_hip_link", "left_knee_link"')
     config = load_robot_config("g1", path)
     with pytest.raises(PipelineError) as error:
         check_against_model(config, load_robot("g1").model)
-    assert str(error.value).startswith(f"{path}: bodies.feet names body 'left_foot_link', which is not in the model")
+    assert str(error.value).startswith(f"{path}: bodies.tracking names body 'left_hip_link', which is not in the model")
+
+
+def test_a_keypoint_the_rewards_do_not_track_is_named(tmp_path: Path) -> None:
+    path = _broken_config(tmp_path, "h1_2", 'keypoints = ["torso_link"', 'keypoints = ["head_link"')
+    with pytest.raises(PipelineError) as error:
+        load_robot_config("h1_2", path)
+    assert str(error.value) == f"{path}: bodies.keypoints names 'head_link', which is not in bodies.tracking"
 
 
 def test_joint_order_mismatch_is_named(tmp_path: Path) -> None:

@@ -66,6 +66,13 @@ def test_zero_action_environment_tracks_and_terminates() -> None:
     assert lengths and 1 <= np.mean(lengths) < 60
 
 
+def test_the_keypoint_rewards_track_the_torso_and_both_hands() -> None:
+    env, _ = _setup()
+    tracked = env.robot.config.tracking_bodies
+    keypoints = [tracked[i] for i in env.term_context.keypoints]
+    assert keypoints == ["torso_link", "left_wrist_yaw_link", "right_wrist_yaw_link"]
+
+
 def test_a_reward_weight_and_a_termination_threshold_set_on_the_command_line_change_key_and_behaviour(
     artifacts: Path,
 ) -> None:

@@ -139,7 +139,7 @@ class TrackingEnv:
         self.term_context = TermContext(
             root=tracked.index(rc.root_body),
             feet=(tracked.index(rc.foot_bodies[0]), tracked.index(rc.foot_bodies[1])),
-            keypoints=tuple(i for i, b in enumerate(tracked) if b not in rc.foot_bodies)[-3:],
+            keypoints=tuple(tracked.index(body) for body in rc.keypoint_bodies),
             joint_lower=lower[p],
             joint_upper=upper[p],
             velocity_limit=self.tensor(rc.velocity_limit)[p],

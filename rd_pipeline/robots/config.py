@@ -59,6 +59,9 @@ class RobotConfig:
     """Left and right foot bodies (contact labels, foot metrics)."""
     tracking_bodies: tuple[str, ...]
     """Bodies tracked by rewards and validation metrics."""
+    keypoint_bodies: tuple[str, ...]
+    """The "VR keypoints" the keypoint rewards track, among `tracking_bodies`: the torso and the
+    hands (the forearms' ends on a robot without hands)."""
     termination_bodies: tuple[str, ...]
     """Bodies whose distance from the reference ends an episode ("motion far")."""
     retarget_map: dict[str, str]
@@ -127,6 +130,7 @@ def load_robot_config(name: str, path: Path | None = None) -> RobotConfig:
         root_body=reader.get("bodies.root", str),
         foot_bodies=(feet[0], feet[1]),
         tracking_bodies=tuple(reader.get("bodies.tracking", list)),
+        keypoint_bodies=tuple(reader.get("bodies.keypoints", list)),
         termination_bodies=tuple(reader.get("bodies.termination", list)),
         retarget_map=dict(reader.get("bodies.retarget", dict)),
         csv_joints=joints if csv_joints == "order" else tuple(csv_joints),
@@ -140,6 +144,17 @@ def load_robot_config(name: str, path: Path | None = None) -> RobotConfig:
 
 def _check_internal(config: RobotConfig) -> None:
     where = config.source
+    # The rewards find these by their place among the tracked bodies.
+    roles = {
+        "bodies.root": (config.root_body,),
+        "bodies.feet": config.foot_bodies,
+        "bodies.keypoints": config.keypoint_bodies,
+        "bodies.termination": config.termination_bodies,
+    }
+    for field, bodies in roles.items():
+        for body in bodies:
+            if body not in config.tracking_bodies:
+                raise PipelineError(f"{where}: {field} names '{body}', which is not in bodies.tracking")
     for joint in config.policy_joints:
         if joint not in config.joint_names:
             raise PipelineError(f"{where}: joints.policy names '{joint}', which is not in joints.order")
@@ -154,7 +169,8 @@ class _Fields:
     """Typed access to dotted TOML keys with errors that name the file and the key."""
 
     def __init__(self, raw: dict, path: Path) -> None:
-        self.raw, self.path = raw, path
+        self.raw = raw
+        self.path = path
 
     def get(self, dotted: str, kind: type | tuple[type, ...]):
         node = self._find(dotted)
