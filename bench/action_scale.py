@@ -106,7 +106,7 @@ def _runner(plan: workspace.Plan, starts: int) -> TrainingRunner:
     job = TrainingJob(
         load_robot(plan.robot),
         reference.frames(start, end),
-        clip_segments(segments, start, end),
+        clip_segments(segments, start, end, reference.fps),
         config,
         Path("unused"),
         None,

@@ -60,7 +60,12 @@ def _job(ctx: StageContext, config: TrainConfig, work: Path) -> tuple[TrainingJo
     say = lambda line: ctx.console.print(line, markup=False, highlight=False)
     checkpoint = starting_checkpoint(work, ctx.restart, shorter, say)
     job = TrainingJob(
-        robot, reference.frames(start, end), clip_segments(segments, start, end), config, work, checkpoint
+        robot,
+        reference.frames(start, end),
+        clip_segments(segments, start, end, reference.fps),
+        config,
+        work,
+        checkpoint,
     )
     return job, (start, end)
 

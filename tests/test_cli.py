@@ -95,6 +95,8 @@ def test_a_choice_outside_its_literal_is_refused_when_params_are_read(artifacts:
             "parameter 'train.env.randomization.mass_factor' must be at least 0, got -1.0",
         ),
         ("validate.protocol.grid_s=0", "parameter 'validate.protocol.grid_s' must be positive, got 0.0"),
+        ("train.sampler.update_interval=0", "parameter 'train.sampler.update_interval' must be positive, got 0"),
+        ("train.sampler.cap_factor=0.5", "parameter 'train.sampler.cap_factor' must be at least 1, got 0.5"),
     ],
 )
 def test_out_of_range_params_are_one_line_naming_the_parameter(assignment: str, message: str, artifacts: Path) -> None:

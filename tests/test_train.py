@@ -22,6 +22,7 @@ from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.ppo import build_ppo
 from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
+from rd_pipeline.rl.runner import Segments, clip_segments
 from rd_pipeline.rl.trainer import load_checkpoint, train
 from rd_pipeline.rl.training_log import read_training_log
 from rd_pipeline.stages import REGISTRY
@@ -64,6 +65,18 @@ def test_zero_action_environment_tracks_and_terminates() -> None:
         lengths += extras["episode_length"].tolist()
     # The reference fed straight to PD falls within seconds: episodes end by motion-far / tilt.
     assert lengths and 1 <= np.mean(lengths) < 60
+
+
+def test_a_clip_keeps_the_whole_segments_inside_it_and_refuses_one_without_any() -> None:
+    segments = Segments(np.array([0, 50, 100]), np.array([50, 50, 30]), np.array([0.2, 0.3, 0.5]))
+    inside = clip_segments(segments, 40, 130, fps=50.0)
+    assert inside.starts.tolist() == [10, 60] and inside.lengths.tolist() == [50, 30]
+    assert inside.weights.tolist() == [0.3, 0.5]
+    with pytest.raises(PipelineError) as error:
+        clip_segments(segments, 25, 80, fps=50.0)
+    assert str(error.value) == (
+        "train.clip 0.5:1.6 s holds no whole segment of the sampling prior (segments of 1 s from the take's start): widen it"
+    )
 
 
 def test_the_keypoint_rewards_track_the_torso_and_both_hands() -> None:

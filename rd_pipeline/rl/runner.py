@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.rl.distributed import ONE_PROCESS, Ranks
 from rd_pipeline.rl.env import TrackingEnv
@@ -206,9 +207,15 @@ def starting_checkpoint(
     return checkpoint_path(work, shorter.iterations)
 
 
-def clip_segments(segments: Segments, start: int, end: int) -> Segments:
-    """The segments that lie wholly inside frames [start, end), in clip frames."""
+def clip_segments(segments: Segments, start: int, end: int, fps: float) -> Segments:
+    """The segments that lie wholly inside frames [start, end), in clip frames; a clip that holds
+    none leaves the sampler nothing to draw from, and is refused."""
     keep = (segments.starts >= start) & (segments.starts + segments.lengths <= end)
+    if not keep.any():
+        raise PipelineError(
+            f"train.clip {start / fps:g}:{end / fps:g} s holds no whole segment of the sampling prior "
+            f"(segments of {segments.lengths.max() / fps:g} s from the take's start): widen it"
+        )
     return Segments(segments.starts[keep] - start, segments.lengths[keep], segments.weights[keep])
 
 

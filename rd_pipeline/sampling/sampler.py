@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal, get_args
 
 from rd_pipeline.lazy import lazy_import
+from rd_pipeline.params import ParamRangeError, require_at_most, require_positive
 
 if TYPE_CHECKING:
     import torch
@@ -61,7 +62,13 @@ class SamplerConfig:
     they fail or the clip ends, so on a clip much longer than they last nearly every start fails
     sooner or later: `start` then flattens r_s near 1 and p_fail cannot single out the hard part."""
     cap_factor: float = 4.0
-    """p_max as a multiple of the uniform probability 1/S."""
+    """p_max as a multiple of the uniform probability 1/S (at least 1: the S caps must hold all the mass)."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "ramp_steps", "update_interval", "ema_alpha")
+        require_at_most(self, 1.0, "ema_alpha")
+        if not self.cap_factor >= 1.0:
+            raise ParamRangeError("cap_factor", f"must be at least 1, got {self.cap_factor}")
 
 
 def water_fill(weights: torch.Tensor, cap: float) -> torch.Tensor:
