@@ -13,8 +13,6 @@ from rd_pipeline.rl.training_config import TrainConfig
 from rd_pipeline.rl.training_log import ScoreFirst, best_held
 from rd_pipeline.robots.assets import model_files
 
-REFERENCE_STAGES = ("retarget", "import")
-
 
 @dataclass(frozen=True)
 class ExportConfig:
@@ -45,17 +43,17 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.robots import load_robot
 
     train = ctx.upstream["policy"]
+    reference = ctx.upstream["reference"]
     manifest = train.manifest
     metrics = manifest["metrics"]
-    reference_stage = next(s for s in REFERENCE_STAGES if s in manifest["upstream"])
     trained = TrainedPolicy(
         folder=train.path,
         config=typed_config(TrainConfig, manifest["params"], "train"),
         observation_size=metrics["observation_size"],
         num_actions=metrics["num_actions"],
         clip_frames=tuple(metrics["clip_frames"]),
-        reference_stage=reference_stage,
-        reference_key=manifest["upstream"][reference_stage],
+        reference_stage=reference.stage,
+        reference_key=reference.key,
     )
     checkpoint = ctx.params.checkpoint or _best(train.path, ctx.params.best_by)
     return export_policy(trained, load_robot(ctx.robot_name), checkpoint, ctx.out_dir)
@@ -70,12 +68,12 @@ def _best(train: Path, best_by: ScoreFirst) -> int:
 
 STAGE = Stage(
     name="export",
-    version=4,
+    version=5,
     description="trained actor -> policy.pt (TorchScript) + policy.json (gains, scales, mask, obs layout, rates)",
     params=ExportConfig,
     provides="deployable_policy",
     run=_run,
     inputs=lambda robot, motion: model_files(robot),
-    requires=("policy",),
+    requires=("policy", "reference"),
     headline=("num_actions", "action_mode"),
 )

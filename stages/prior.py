@@ -8,6 +8,8 @@ from typing import Any
 from rd_pipeline.artifacts.stage import Stage, StageContext
 
 PLOT_FILE = "balancing.png"
+SOLVER_ZERO = 1e-6
+"""Weights up to this are an interior-point solver's zeros, not segments the prior samples."""
 
 
 @dataclass(frozen=True)
@@ -39,7 +41,8 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     )
     plot_balancing(stats, prior, ctx.out_dir / PLOT_FILE)
     support = stats.histograms.sum(axis=0) > 0
-    before, after = flatness(prior.marginal_before, support), flatness(prior.marginal_after, support)
+    before = flatness(prior.marginal_before, support)
+    after = flatness(prior.marginal_after, support)
     per_joint = lambda values: {j: round(float(v), 4) for j, v in zip(stats.selected, values)}
     return {
         "segments": stats.n_segments,
@@ -50,7 +53,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         "kl_before_nats": per_joint(before["kl_nats"]),
         "kl_after_nats": per_joint(after["kl_nats"]),
         "weight_max_over_uniform": round(float(prior.weights.max() * stats.n_segments), 3),
-        "segments_with_weight": int((prior.weights > 1e-6).sum()),
+        "segments_with_weight": int((prior.weights > SOLVER_ZERO).sum()),
     }
 
 

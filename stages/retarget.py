@@ -37,7 +37,8 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         track=lambda frames, total, label: ctx.track(frames, total, f"{ctx.robot} {label}"),
     )
     seconds = time.perf_counter() - began
-    reference, targets = result.reference, result.targets
+    reference = result.reference
+    targets = result.targets
     reference.save(ctx.out_dir / REFERENCE_FILE)
     targets.save(ctx.out_dir / TARGETS_FILE)
     feet = targets.foot_orientations(robot.config.foot_bodies)

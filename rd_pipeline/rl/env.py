@@ -101,12 +101,13 @@ class TrackingEnv:
         self.device = self.backend.device
         self.dr_params = self.tensor(dr_params)
         effort = np.asarray(self.robot.config.effort_limit)
-        scale = events.random_joint_force_scale(config.randomization, dr_params[:, 8], effort)
+        rfi_factor = dr_params[:, events.DR_PARAMS.index("rfi_factor")]
+        scale = events.random_joint_force_scale(config.randomization, rfi_factor, effort)
         self.joint_force_scale = self.tensor(scale, torch.float64)
         self.joint_force = torch.zeros(self.num_envs, base.nv, dtype=torch.float64, device=self.device)
         self.generator = torch.Generator(device=self.device).manual_seed(self.seed)
         """Draws the reset noise and the injected joint forces on the device."""
-        self.delay = self.tensor(dr_params[:, 7], torch.long)
+        self.delay = self.tensor(dr_params[:, events.DR_PARAMS.index("delay")], torch.long)
         return base
 
     def _index_model(self, base: mujoco.MjModel) -> None:

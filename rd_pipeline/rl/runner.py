@@ -91,7 +91,7 @@ class TrainingOutcome:
     num_actions: int
     """Policy outputs."""
     sampler_step: int
-    """Sampler updates made."""
+    """Control steps the sampler counted (its failure EMA updates every `update_interval` of them)."""
     failure_rate: np.ndarray
     """(S,) the sampler's failure rate per segment."""
     probabilities: np.ndarray
