@@ -295,12 +295,14 @@ def _floor_contact(model: mujoco.MjModel, data: mujoco.MjData, floor: list[int],
 def randomized_models(
     model: mujoco.MjModel, count: int, rng: np.random.Generator, ranges: Randomization = Randomization()
 ) -> list[mujoco.MjModel]:
-    """`count` copies of `model` with the training ranges of link mass, ground friction and PD gains
-    drawn per copy: the optional randomized evaluation."""
+    """`count` copies of `model` with link mass, ground friction and PD gains drawn per copy from
+    `ranges`: the optional randomized evaluation. Validation passes the default ranges (the
+    paper's training ranges), whatever ranges the policy trained with, so that every policy is
+    scored on the same physics."""
     out = []
     for _ in range(count):
         mass = rng.uniform(*ranges.mass_factor)
         friction = rng.uniform(*ranges.friction_factor)
-        kp, kd = rng.uniform(*ranges.pd_factor, size=2)
-        out.append(randomized_copy(model, mass, friction, kp, kd))
+        gains = rng.uniform(*ranges.pd_factor, size=2)
+        out.append(randomized_copy(model, mass, friction, gains[0], gains[1]))
     return out

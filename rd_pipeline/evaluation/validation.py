@@ -3,7 +3,8 @@ exported files alone, beside the zero-action baseline, reduced to a typed report
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -126,7 +127,6 @@ def validate_policy(
     (per seed) randomized physics; `advance` is called after each batch of rollouts."""
     spec = load_exported_spec(exported, clip.key)
     model = deploy_model(spec)
-    torch.set_num_threads(1)  # a small MLP on a few hundred rows; the physics threads want the cores
     controllers = _Controllers(exported, spec, config)
     rc = robot.config
     bodies = BodySets(rc.root_body, rc.tracking_bodies, rc.termination_bodies, rc.foot_bodies)
@@ -141,36 +141,57 @@ def validate_policy(
     rng = np.random.default_rng(config.bootstrap_seed)
     nominal = {}
     first = {}
-    for name in CONTROLLERS:
-        done = rollouts(name, [model] * len(starts))
-        nominal[name] = _nominal_summary(done, control_hz, rng)
-        first[name] = done[0]
-        advance(name)
-    randomized = _randomized_summary(model, len(starts), config.randomized_seeds, rollouts, control_hz, advance)
-    compared, gap = controllers.runtime_gap()
+    # A small MLP on a few hundred rows: the physics threads want the cores.
+    with _torch_threads(1):
+        for name in CONTROLLERS:
+            done = rollouts(name, [model] * len(starts))
+            nominal[name] = _nominal_summary(done, control_hz, rng)
+            first[name] = done[0]
+            advance(name)
+        randomized = _randomized_summary(model, len(starts), config.randomized_seeds, rollouts, control_hz, advance)
+        compared, gap = controllers.runtime_gap()
     details = {
         "robot": rc.name,
         "motion": motion,
         "policy_key": policy_key,
-        "reference": {
-            "stage": clip.stage,
-            "key": clip.key,
-            "start_frame": clip.start_frame,
-            "end_frame": clip.end_frame,
-            "duration_s": clip.motion.duration_s,
-        },
+        "reference": _reference_details(clip),
         "rates": spec.get("rates"),
-        "protocol": {
-            "grid_s": config.protocol.grid_s,
-            "starts": len(starts),
-            "motion_far_m": config.protocol.motion_far_m,
-            "orientation_limit_rad": config.protocol.orientation_limit_rad,
-        },
+        "protocol": _protocol_details(config, len(starts)),
         "nominal": nominal,
         "runtime": {"ran": config.runtime, "observations_compared": compared, "onnx_vs_torchscript_max_abs_diff": gap},
         **({"randomized": randomized} if randomized else {}),
     }
     return Validation(ValidationReport.from_details(details), first["policy"])
+
+
+@contextmanager
+def _torch_threads(count: int) -> Iterator[None]:
+    """Torch on `count` threads within the block, and on as many as before it after."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(count)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+def _reference_details(clip: ReferenceClip) -> dict[str, Any]:
+    return {
+        "stage": clip.stage,
+        "key": clip.key,
+        "start_frame": clip.start_frame,
+        "end_frame": clip.end_frame,
+        "duration_s": clip.motion.duration_s,
+    }
+
+
+def _protocol_details(config: ValidationConfig, starts: int) -> dict[str, Any]:
+    return {
+        "grid_s": config.protocol.grid_s,
+        "starts": starts,
+        "motion_far_m": config.protocol.motion_far_m,
+        "orientation_limit_rad": config.protocol.orientation_limit_rad,
+    }
 
 
 def _nominal_summary(rollouts: list[Rollout], control_hz: float, rng: np.random.Generator) -> dict[str, Any]:
