@@ -98,7 +98,7 @@ def _into_artifact(work: Path, out_dir: Path) -> list[dict]:
 
 def _plot(rows: list[dict], best: dict, outcome: TrainingOutcome, out_dir: Path) -> None:
     """The learning curve and the sampler's failure profile, beside the checkpoints."""
-    from rd_pipeline.rl.trainer import plot_learning_curve
+    from rd_pipeline.rl.plots import plot_learning_curve
     from rd_pipeline.sampling.plots import plot_sampler_profile
 
     plot_learning_curve(rows, best, out_dir / CURVE_FILE)
