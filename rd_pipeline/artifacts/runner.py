@@ -186,34 +186,51 @@ def execute(
         robot = pipeline.robot if stage.per_robot else None
         label = _label(robot, pipeline.motion)
         began = time.perf_counter()
-        existing = usable.get(stage.name)
+        ref = usable.get(stage.name)
         if entry.stage in before:
-            if existing is None:
+            if ref is None:
                 raise PipelineError(
                     f"upstream stage '{stage.name}' has no usable artifact {entry.key} for {label}; "
                     f"make it first: `rd-pipeline stage {stage.name}` with the same options, or a run through it"
                 )
-            refs[stage.provides] = existing
+            refs[stage.provides] = ref
             continue
-        if existing is None:
-            waiting = f"[yellow]wait[/]   {stage.name:<9} {escape(label)}  {entry.key}: another run is computing it"
-            with store.locked(stage.name, robot, pipeline.motion, entry.key, on_wait=partial(console.print, waiting)):
-                existing = _made_meanwhile(store, entry, robot, pipeline.motion, force)
-                if existing is None:
-                    console.print(f"[cyan]run[/]    {stage.name:<9} {escape(label)}  {entry.key}")
-                    ref = _run_stage(pipeline, store, entry, refs, console, resume=resume, restart=force)
-                    seconds = time.perf_counter() - began
-                    console.print(
-                        f"[green]done[/]   {stage.name:<9} {escape(label)}  {entry.key}  ({seconds:.2f} s) -> {escape(str(ref.path))}"
-                    )
-                    refs[stage.provides] = ref
-                    outcomes.append(StageOutcome(stage.name, entry.key, ref.path, False, seconds))
-                    continue
-        refs[stage.provides] = existing
+        cached = ref is not None
+        if ref is None:
+            ref, cached = _compute(pipeline, store, entry, refs, console, force, resume)
+        refs[stage.provides] = ref
         seconds = time.perf_counter() - began
-        console.print(f"[green]cached[/] {stage.name:<9} {escape(label)}  {entry.key}  ({seconds:.2f} s, no work)")
-        outcomes.append(StageOutcome(stage.name, entry.key, existing.path, True, seconds))
+        if cached:
+            console.print(f"[green]cached[/] {stage.name:<9} {escape(label)}  {entry.key}  ({seconds:.2f} s, no work)")
+        else:
+            console.print(
+                f"[green]done[/]   {stage.name:<9} {escape(label)}  {entry.key}  ({seconds:.2f} s) -> {escape(str(ref.path))}"
+            )
+        outcomes.append(StageOutcome(stage.name, entry.key, ref.path, cached, seconds))
     return outcomes
+
+
+def _compute(
+    pipeline: Pipeline,
+    store: ArtifactStore,
+    entry: PlannedStage,
+    refs: dict[str, ArtifactRef],
+    console: Console,
+    force: bool,
+    resume: bool,
+) -> tuple[ArtifactRef, bool]:
+    """The entry's artifact, made here under its key's lock, or by a concurrent run while this one
+    waited for the lock; True where the concurrent run made it."""
+    stage = entry.stage
+    robot = pipeline.robot if stage.per_robot else None
+    label = _label(robot, pipeline.motion)
+    waiting = f"[yellow]wait[/]   {stage.name:<9} {escape(label)}  {entry.key}: another run is computing it"
+    with store.locked(stage.name, robot, pipeline.motion, entry.key, on_wait=partial(console.print, waiting)):
+        made = _made_meanwhile(store, entry, robot, pipeline.motion, force)
+        if made is not None:
+            return made, True
+        console.print(f"[cyan]run[/]    {stage.name:<9} {escape(label)}  {entry.key}")
+        return _run_stage(pipeline, store, entry, refs, console, resume=resume, restart=force), False
 
 
 def _usable_artifacts(
@@ -299,24 +316,28 @@ def _run_stage(
             metrics = stage.run(context)
         except KeyboardInterrupt:
             raise _interrupted(context, stage.name) from None
-        write_manifest(
-            out,
-            {
-                "stage": stage.name,
-                "key": entry.key,
-                "robot": robot,
-                "motion": pipeline.motion,
-                "params": dataclasses.asdict(entry.params),
-                "inputs": {str(path): entry.input_hashes[label] for label, path in entry.inputs.items()},
-                "upstream": entry.upstream,
-                "code_version": code_version(),
-                "created_at": datetime.now(UTC).isoformat(timespec="seconds"),
-                "duration_s": round(time.perf_counter() - began, 3),
-                "metrics": metrics,
-                "files": file_records(out),
-            },
-        )
+        write_manifest(out, _manifest(entry, robot, pipeline.motion, time.perf_counter() - began, metrics, out))
     return ArtifactRef(stage.name, entry.key, store.folder(stage.name, robot, pipeline.motion) / entry.key)
+
+
+def _manifest(
+    entry: PlannedStage, robot: str | None, motion: str, seconds: float, metrics: dict[str, Any], out: Path
+) -> dict[str, Any]:
+    """What an artifact says of itself: what made it, from what, when, its metrics and its files' hashes."""
+    return {
+        "stage": entry.stage.name,
+        "key": entry.key,
+        "robot": robot,
+        "motion": motion,
+        "params": dataclasses.asdict(entry.params),
+        "inputs": {str(path): entry.input_hashes[label] for label, path in entry.inputs.items()},
+        "upstream": entry.upstream,
+        "code_version": code_version(),
+        "created_at": datetime.now(UTC).isoformat(timespec="seconds"),
+        "duration_s": round(seconds, 3),
+        "metrics": metrics,
+        "files": file_records(out),
+    }
 
 
 def _interrupted(context: StageContext, stage: str) -> KeyboardInterrupt:
