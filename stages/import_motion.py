@@ -12,6 +12,7 @@ from rich.markup import escape
 from rd_pipeline import paths
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.motion import Interpolation
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.params import require_positive
 from rd_pipeline.robots.assets import model_files
@@ -25,7 +26,7 @@ class ImportConfig:
     """Frame rate of the dataset CSVs."""
     fps: float = 50.0
     """Frame rate of the reference motion (the policy rate)."""
-    interpolation: str = "cubic"
+    interpolation: Interpolation = "cubic"
     """Joint and root-position interpolation: `cubic` (smooth velocities) or `linear`."""
     contact: ContactThresholds = ContactThresholds()
     """When a robot foot counts as planted (its height above the clip's ground, and its speed)."""

@@ -66,6 +66,13 @@ def test_a_choice_outside_its_literal_is_refused_when_params_are_read(artifacts:
         "legs_torso, all, reference_locked, got 'half'"
     )
     assert not (artifacts / "parse").exists()  # refused before any stage ran
+    take = ("--robot", "h1_2", "--motion", "dance2_subject4")
+    result = cli("run", *take, "--until", "import", "--set", "import.interpolation=quadratic")
+    assert result.returncode != 0
+    assert result.stderr.strip().splitlines()[-1] == (
+        "error: parameter 'import.interpolation' must be one of cubic, linear, got 'quadratic'"
+    )
+    assert not (artifacts / "import").exists()
 
 
 @pytest.mark.parametrize(

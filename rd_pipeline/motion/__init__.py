@@ -1,5 +1,10 @@
 """Motion I/O: BVH parsing, human motion, robot reference motions, dataset CSV import."""
 
+from typing import Literal
+
+Interpolation = Literal["cubic", "linear"]
+"""How a resampled motion is filled between source frames."""
+
 PLAUSIBLE_FPS = (20.0, 500.0)
 """Frame rates a motion capture file may declare: LAFAN1 is 30 fps, capture systems record 24 to
 240 fps, high-speed ones up to about 480. A rate outside is a corrupt header (a `Frame Time: 10`

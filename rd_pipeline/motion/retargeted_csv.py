@@ -11,7 +11,7 @@ from scipy.interpolate import interp1d
 from scipy.spatial.transform import Rotation, Slerp
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.motion import QUATERNION_NORM_TOLERANCE, too_short
+from rd_pipeline.motion import QUATERNION_NORM_TOLERANCE, Interpolation, too_short
 from rd_pipeline.motion.bvh import is_float
 from rd_pipeline.motion.contact import ContactThresholds, label_contacts
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
@@ -60,7 +60,7 @@ def import_retargeted_csv(
     robot: Robot,
     source_fps: float,
     target_fps: float,
-    interpolation: str,
+    interpolation: Interpolation,
     contact: ContactThresholds,
 ) -> CsvImportResult:
     """Map dataset columns onto the robot by joint name, resample to `target_fps`, complete by FK."""
@@ -86,12 +86,9 @@ def import_retargeted_csv(
     n_target = int(round(n_source * target_fps / source_fps))
     target_t = np.minimum(np.arange(n_target) / target_fps, source_t[-1])
 
-    kind = {"linear": "linear", "cubic": "cubic"}.get(interpolation)
-    if kind is None:
-        raise PipelineError(f"import.interpolation must be 'linear' or 'cubic', got '{interpolation}'")
     joint_cols = [columns[j] for j in config.joint_names]
-    joint_pos = interp1d(source_t, table[:, joint_cols], kind=kind, axis=0)(target_t)
-    root_pos = interp1d(source_t, table[:, :3], kind=kind, axis=0)(target_t)
+    joint_pos = interp1d(source_t, table[:, joint_cols], kind=interpolation, axis=0)(target_t)
+    root_pos = interp1d(source_t, table[:, :3], kind=interpolation, axis=0)(target_t)
     root_rot = Slerp(source_t, Rotation.from_quat(table[:, 3:7]))(target_t)  # CSV quaternions are xyzw
     root_quat = root_rot.as_quat()[:, [3, 0, 1, 2]]
 
