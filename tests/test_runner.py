@@ -174,9 +174,12 @@ def test_killed_stage_leaves_no_artifact(artifacts: Path) -> None:
     assert ArtifactStore(artifacts).keys("import", "h1_2", "dance2_subject4") == []
     status = json.loads(cli("status", "--robot", "h1_2", "--motion", "dance2_subject4", "--json").stdout)
     assert status["pipelines"][0]["stages"][0]["state"] == "missing"
+    # Another key's, of a process this machine cannot see (one sharing the store), is not this run's to clean.
+    other = folder / ".tmp-0123456789ab-999999-0badc0de"
+    other.mkdir()
     rerun = cli("stage", "import", "--robot", "h1_2", "--motion", "dance2_subject4")
     assert rerun.returncode == 0 and "run    import" in rerun.stderr
-    assert list(folder.glob(".tmp-*")) == []  # the abandoned folder was cleaned up
+    assert list(folder.glob(".tmp-*")) == [other]  # the key's abandoned folder was cleaned up
     assert len(ArtifactStore(artifacts).keys("import", "h1_2", "dance2_subject4")) == 1
 
 

@@ -294,7 +294,7 @@ def _run_stage(
 ) -> ArtifactRef:
     stage = entry.stage
     robot = pipeline.robot if stage.per_robot else None
-    store.remove_abandoned(stage.name, robot, pipeline.motion)
+    store.remove_abandoned(stage.name, robot, pipeline.motion, entry.key)
     began = time.perf_counter()
     replace = store.find(stage.name, robot, pipeline.motion, entry.key) is not None
     with store.writing(stage.name, robot, pipeline.motion, entry.key, replace=replace) as out:

@@ -166,13 +166,14 @@ class ArtifactStore:
             f"cannot write the artifact store {self.root} ({exc.strerror}); set RD_ARTIFACTS to a writable folder"
         )
 
-    def remove_abandoned(self, stage: str, robot: str | None, motion: str) -> int:
-        """Delete temporary folders left by killed processes (whose pid no longer runs)."""
+    def remove_abandoned(self, stage: str, robot: str | None, motion: str, key: str) -> int:
+        """Delete the temporary folders a killed run of `key` left. Call it holding the key's lock:
+        whatever made them has stopped. Other keys' are left alone, as a process on another machine
+        sharing the store may be writing them."""
         folder = self.folder(stage, robot, motion)
         removed = 0
-        for temp in folder.glob(f"{TEMP_PREFIX}*") if folder.is_dir() else []:
-            pid = int(temp.name.split("-")[-2]) if temp.name.count("-") >= 3 else -1
-            if not _pid_alive(pid):
+        for pattern in (f"{TEMP_PREFIX}{key}-*", f"{TEMP_PREFIX}old-{key}-*"):
+            for temp in folder.glob(pattern) if folder.is_dir() else []:
                 shutil.rmtree(temp, ignore_errors=True)
                 removed += 1
         return removed
@@ -198,15 +199,3 @@ def _same_file(path: Path, handle: Any) -> bool:
         return os.stat(path).st_ino == os.fstat(handle.fileno()).st_ino
     except FileNotFoundError:
         return False
-
-
-def _pid_alive(pid: int) -> bool:
-    if pid <= 0:
-        return False
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
