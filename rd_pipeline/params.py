@@ -62,8 +62,10 @@ def read_params_file(path: Path, stage_names: list[str]) -> tuple[str | None, di
     """(profile, per-stage values) from a DVC-style params file with a `stages:` table."""
     try:
         raw = yaml.safe_load(path.read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise PipelineError(f"{path}: cannot read params file ({str(exc).splitlines()[0]})") from None
+    if not isinstance(raw, dict):
+        raise PipelineError(f"{path}: a params file is a mapping with a 'stages:' table, not a {type(raw).__name__}")
     stages = raw.get("stages") or {}
     if not isinstance(stages, dict):
         raise PipelineError(f"{path}: 'stages' must be a mapping of stage name to params")

@@ -30,3 +30,25 @@ def test_a_plan_s_reference_is_the_one_its_providing_stage_made_and_a_missing_on
     other = r"^stage 'retarget' is not in the csv pipeline \(stages: import, stats, prior, train, export, validate\)$"
     with pytest.raises(PipelineError, match=other):
         workspace.reference(plan, "retarget")
+
+
+def test_seed_outranks_the_params_file_and_a_seed_override_outranks_it(tmp_path: Path) -> None:
+    params = tmp_path / "params.yaml"
+    params.write_text("stages:\n  train:\n    seed: 0\n")
+    seeded = workspace.plan("g1", "dance1_subject2", "smoke", params_file=params, seed=3, store=tmp_path)
+    assert seeded.stage("train").params.seed == 3
+    overridden = workspace.plan(
+        "g1", "dance1_subject2", "smoke", params_file=params, overrides=("train.seed=5",), seed=3, store=tmp_path
+    )
+    assert overridden.stage("train").params.seed == 5
+    unseeded = workspace.plan("g1", "dance1_subject2", "smoke", params_file=params, store=tmp_path)
+    assert unseeded.stage("train").params.seed == 0
+
+
+@pytest.mark.parametrize(("text", "kind"), [("- a\n- b\n", "list"), ("just words\n", "str")])
+def test_a_params_file_that_is_no_mapping_is_one_line(tmp_path: Path, text: str, kind: str) -> None:
+    params = tmp_path / "params.yaml"
+    params.write_text(text)
+    with pytest.raises(PipelineError) as error:
+        workspace.plan("g1", "dance1_subject2", "smoke", params_file=params, store=tmp_path)
+    assert str(error.value) == f"{params}: a params file is a mapping with a 'stages:' table, not a {kind}"

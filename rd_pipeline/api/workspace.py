@@ -90,14 +90,16 @@ def plan(
     if robot is not None:
         load_robot_config(robot)  # unknown robot: one clear line before anything else
     names = [stage.name for stage in REGISTRY]
-    profile_name, values = layered_params(profile, names, params_file, overrides)
-    if seed is not None:
-        for stage in REGISTRY:
-            if "seed" in {field.name for field in dataclasses.fields(stage.params)}:
-                values.setdefault(stage.name, {}).setdefault("seed", seed)
+    # `seed` outranks the profile and the params file; a `stage.seed=` override outranks it.
+    seeded = () if seed is None else tuple(f"{stage.name}.seed={seed}" for stage in REGISTRY if _has_seed(stage))
+    profile_name, values = layered_params(profile, names, params_file, (*seeded, *overrides))
     pipeline = Pipeline(REGISTRY, robot, motion, resolve_source(robot, motion, source), values)
     _check_params(pipeline)
     return Plan(pipeline, ArtifactStore(store or paths.artifacts_dir()), profile_name)
+
+
+def _has_seed(stage: Stage) -> bool:
+    return "seed" in {field.name for field in dataclasses.fields(stage.params)}
 
 
 def _check_params(pipeline: Pipeline) -> None:
