@@ -9,10 +9,13 @@ import mujoco
 import numpy as np
 import pytest
 import torch
+from conftest import h1_2_dance_env
 
 from rd_pipeline.rl import reward_terms, terminations
 from rd_pipeline.rl.actions import RESIDUAL_PRESETS, ActionConfig, ResidualActions, joint_semantics
 from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
+from rd_pipeline.rl.env_config import EnvConfig
+from rd_pipeline.rl.events import rsi_state
 from rd_pipeline.rl.physics import MujocoCpuBackend
 from rd_pipeline.rl.reward_terms import PenaltyTerm, TermContext, TrackingState
 from rd_pipeline.rl.rewards import GROUPS, AdaptiveSigma, RewardManager, RewardsConfig
@@ -375,3 +378,29 @@ def test_quaternion_product_and_rotation_vectors_match_scipy() -> None:
     expected = (Rotation.from_rotvec(rotvec) * base).as_quat()[:, [3, 0, 1, 2]]
     same_sign = np.sign((mine * expected).sum(1))[:, None]
     assert np.allclose(mine, same_sign * expected, atol=1e-12)
+
+
+def test_a_reset_draws_the_push_timer_anew() -> None:
+    """Pushes come 5-10 s into every episode; a timer carried over from a long episode would
+    postpone them, and past the clip's length stop them."""
+    env = h1_2_dance_env(EnvConfig(num_envs=6, threads=1))
+    env.next_push[:] = 10_000
+    env.reset(torch.arange(6))
+    lo, hi = (round(seconds / env.step_dt) for seconds in env.config.randomization.push_interval_s)
+    assert ((env.next_push >= lo) & (env.next_push <= hi)).all()
+    assert env.next_push.unique().numel() > 1
+
+
+def test_rsi_perturbs_the_root_angular_velocity_by_its_noise() -> None:
+    env = h1_2_dance_env(EnvConfig(num_envs=1, threads=1))
+    frames = torch.full((4000,), 600)
+    model = env.backend.models[0]
+    ref = env.command.ref
+    args = (ref, frames, model.nq, model.nv, env.qpos_idx, env.dof_idx, env.joint_range)
+    quiet = dataclasses.replace(env.config, rsi_root_rot_deg=0.0, rsi_root_vel=0.0)
+    noisy = dataclasses.replace(quiet, rsi_root_vel=0.01)
+    _, still = rsi_state(quiet, *args, torch.Generator().manual_seed(0))
+    _, shaken = rsi_state(noisy, *args, torch.Generator().manual_seed(0))
+    assert torch.equal(still[:, 3:6], still[:1, 3:6].expand(4000, 3))
+    spread = (shaken[:, 3:6] - still[:, 3:6]).std(dim=0)
+    assert torch.allclose(spread, torch.full((3,), 0.01, dtype=spread.dtype), rtol=0.1)

@@ -163,8 +163,7 @@ class TrackingEnv:
         joints = len(self.robot.config.joint_names)
         self.target_queue = torch.zeros(n, queue, joints, dtype=DTYPE, device=device)
         self.feet_air_time = torch.zeros(n, 2, dtype=DTYPE, device=device)
-        intervals = events.push_intervals(config.randomization, n, self.step_dt, self.rng)
-        self.next_push = torch.as_tensor(intervals)
+        self.next_push = torch.zeros(n, dtype=torch.long)  # drawn at each reset
         self.curriculum = curricula.initial_state(config.curricula, config.terminations)
         frame_size = sum(term.size for term in self.actor_terms)
         self.obs_frames = torch.zeros(n, config.history, frame_size, dtype=DTYPE, device=device)
@@ -187,6 +186,9 @@ class TrackingEnv:
         )
         self.command.start(host_ids, frames)
         self.episode_length_buf[host_ids] = 0
+        # Push timers count from each episode's start, or a long episode would postpone every later push.
+        intervals = events.push_intervals(self.config.randomization, len(host_ids), self.step_dt, self.rng)
+        self.next_push[host_ids] = torch.as_tensor(intervals)
         device_ids = host_ids.to(self.device)
         self.backend.set_state(device_ids, qpos, qvel)
         self.action_history[device_ids] = 0.0

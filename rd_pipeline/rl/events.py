@@ -107,7 +107,7 @@ def rsi_state(
     qpos = torch.zeros(k, nq, dtype=torch.float64, device=device)
     qvel = torch.zeros(k, nv, dtype=torch.float64, device=device)
     # Draw order is part of the seed's meaning: root position, root rotation, joint positions,
-    # root velocity, joint velocities.
+    # root linear and angular velocity, joint velocities.
     root_noise = normal(k, 3) * c.rsi_root_pos_m
     root_noise[:, 2] = 0.0
     qpos[:, :3] = ref.root_pos[frames].double() + root_noise
@@ -115,7 +115,8 @@ def rsi_state(
     qpos[:, 3:7] = quat.multiply(quat.from_rotation_vector(turn), ref.root_quat[frames].double())
     qpos[:, qpos_idx] = ref.joint_pos[frames].double() + uniform(c.rsi_joint_pos, k, joints)
     qvel[:, :3] = ref.root_lin_vel[frames].double() + normal(k, 3) * c.rsi_root_vel
-    qvel[:, 3:6] = quat.rotate_inverse(qpos[:, 3:7].float(), ref.root_ang_vel[frames]).double()
+    root_ang_vel = quat.rotate_inverse(qpos[:, 3:7].float(), ref.root_ang_vel[frames]).double()
+    qvel[:, 3:6] = root_ang_vel + normal(k, 3) * c.rsi_root_vel
     qvel[:, dof_idx] = ref.joint_vel[frames].double() + uniform(c.rsi_joint_vel, k, joints)
     qpos[:, qpos_idx] = torch.clamp(qpos[:, qpos_idx], joint_range[:, 0], joint_range[:, 1])
     return qpos, qvel

@@ -3,7 +3,7 @@
 dataclass (weight, sigma, thresholds) that is a field of `RewardsConfig` named after its function. A
 new term is one registered function plus its field.
 
-Tracking terms are Gaussian kernels w * exp(-e / sigma^2) of a mean squared error e; regularization
+Tracking terms are Gaussian kernels w * exp(-e / sigma^2) of a squared error e; regularization
 terms are penalties w * P (w < 0) scaled by the penalty curriculum. Every term belongs to a group,
 and each group is one value head of the critic.
 """
