@@ -35,6 +35,7 @@ def test_warp_backend_matches_c_mujoco_on_a_short_rollout() -> None:
     base = simulation_model(robot)
     heavy = copy.copy(base)
     heavy.body_mass[1:] *= 1.1  # a randomized world: per-world fields must reach Warp
+    heavy.body_inertia[1:] *= 1.1
     models = [base, heavy, base]
     frames = np.array([0, 0, 200])
     qpos = np.zeros((3, base.nq))

@@ -188,7 +188,14 @@ def _pd_spec(
     return spec
 
 
-RANDOMIZED_FIELDS = ("body_mass", "geom_friction", "body_ipos", "actuator_gainprm", "actuator_biasprm")
+RANDOMIZED_FIELDS = (
+    "body_mass",
+    "body_inertia",
+    "geom_friction",
+    "body_ipos",
+    "actuator_gainprm",
+    "actuator_biasprm",
+)
 """Model fields `randomized_copy` changes (per-world arrays in batched backends)."""
 
 
@@ -201,10 +208,12 @@ def randomized_copy(
     com_body: int | None = None,
     com_offset: np.ndarray | None = None,
 ) -> mujoco.MjModel:
-    """A copy of `model` with link masses, ground friction and PD gains scaled by the given factors
-    and, optionally, body `com_body`'s centre of mass moved by `com_offset` (domain randomization)."""
+    """A copy of `model` with link masses (and with them their rotational inertias: the same shape,
+    heavier), ground friction and PD gains scaled by the given factors and, optionally, body
+    `com_body`'s centre of mass moved by `com_offset` (domain randomization)."""
     out = copy.copy(model)
     out.body_mass[1:] *= mass
+    out.body_inertia[1:] *= mass
     out.geom_friction[:, 0] *= friction
     if com_body is not None:
         out.body_ipos[com_body] += com_offset

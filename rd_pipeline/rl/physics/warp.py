@@ -1,7 +1,7 @@
 """MuJoCo Warp physics backend: every environment is one world of a single batched Warp model.
 
 Same seam as `MujocoCpuBackend` (the environment logic does not change). Domain-randomized fields
-that differ between environments (link mass, friction, pelvis COM, PD gains) become per-world
+that differ between environments (link mass and inertia, friction, pelvis COM, PD gains) become per-world
 arrays. State comes and goes as torch tensors that share memory with Warp's arrays
 (`wp.to_torch`), so on a GPU nothing crosses to the host between physics and learning.
 
