@@ -86,6 +86,18 @@ def test_a_truncated_artifact_is_reported_and_recomputed(artifacts: Path) -> Non
     assert _states("h1_2", "dance2_subject4")["import"]["state"] == "cached"
 
 
+def test_a_key_folder_without_its_manifest_is_replaced_by_the_rerun(artifacts: Path) -> None:
+    assert cli(*CSV_RUN).returncode == 0
+    (folder,) = list((artifacts / "import" / "h1_2" / "dance2_subject4").iterdir())
+    (folder / "manifest.json").unlink()
+    assert _states("h1_2", "dance2_subject4")["import"]["state"] == "missing"
+    rerun = cli(*CSV_RUN)
+    assert rerun.returncode == 0, rerun.stderr
+    assert "run    import" in rerun.stderr
+    assert (folder / "manifest.json").is_file()
+    assert _states("h1_2", "dance2_subject4")["import"]["state"] == "cached"
+
+
 @pytest.mark.slow
 def test_a_changed_byte_is_found_by_verify_and_when_a_stage_loads_the_artifact(artifacts: Path) -> None:
     assert cli(*CSV_RUN).returncode == 0

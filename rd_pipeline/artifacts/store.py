@@ -109,7 +109,10 @@ class ArtifactStore:
             if not (temp / MANIFEST).is_file():
                 raise RuntimeError(f"stage {stage} finished without writing {MANIFEST}")
             final = folder / key
-            if final.exists() and replace:
+            # A folder without a manifest under the key is no artifact (emptied by hand, or a copy
+            # cut short): the new one takes its place.
+            stale = final.exists() and not (final / MANIFEST).is_file()
+            if final.exists() and (replace or stale):
                 old = folder / f"{TEMP_PREFIX}old-{key}-{os.getpid()}-{uuid.uuid4().hex[:8]}"
                 os.replace(final, old)
                 os.replace(temp, final)
