@@ -1,4 +1,5 @@
-"""File helpers below the store: content hashes, and array files read with one clear error when damaged."""
+"""File helpers below the store: content hashes, array files read with one clear error when
+damaged, and files written whole or not at all."""
 
 from __future__ import annotations
 
@@ -23,6 +24,21 @@ def open_npz(path: Path) -> Iterator[np.lib.npyio.NpzFile]:
         raise PipelineError(
             f"{path}: cannot be read ({type(exc).__name__}: {exc}); `rd-pipeline run` recomputes a damaged artifact"
         ) from None
+
+
+@contextmanager
+def written_whole(path: Path, suffix: str = "") -> Iterator[Path]:
+    """A hidden file beside `path` to write, which takes `path`'s place when the block ends and is
+    removed when it fails: no reader sees half a file, and a failed write leaves nothing behind.
+    `suffix` ends its name where the writer insists on one (`np.savez` adds `.npz`)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(f".{path.name}.partial{suffix}")
+    try:
+        yield partial
+        partial.replace(path)
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
 
 
 def file_sha256(path: Path) -> str:

@@ -59,6 +59,17 @@ def test_a_bad_rate_is_one_line(artifacts: Path, tmp_path: Path) -> None:
     assert result.returncode == 2 and result.stderr.strip().endswith("error: --fps must be positive, got 0")
 
 
+@pytest.mark.parametrize("format", ["csv", "mjlab"])
+def test_an_unwritable_out_is_one_line_and_leaves_no_partial_file(format: str, artifacts: Path, tmp_path: Path) -> None:
+    taken = tmp_path / "out" / "taken"
+    taken.mkdir(parents=True)  # a folder where the file should go
+    args = ["export-motion", "--robot", "h1_2", "--motion", "dance2_subject4", "--format", format]
+    result = cli(*args, "--out", str(taken))
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines()[-1] == f"error: cannot write {taken} (Is a directory)"
+    assert [path.name for path in taken.parent.iterdir()] == ["taken"]
+
+
 @pytest.mark.parametrize(("robot_name", "fps"), [("g1", None), ("h1_2", 30.0)])
 def test_mjlab_npz_follows_the_task_model_order_and_its_kinematics(
     robot_name: str, fps: float | None, artifacts: Path, tmp_path: Path

@@ -289,12 +289,15 @@ def export_motion(cmd: ExportMotion, console: Console) -> int:
     reference = ReferenceMotion.load(folder / REFERENCE_FILE)
     robot = load_robot(cmd.robot)
     missing: list[str] = []
-    if cmd.format == "csv":
-        fps = cmd.fps or 30.0
-        frames = write_dataset_csv(reference, robot.config, cmd.out, fps)
-    else:
-        fps = cmd.fps or reference.fps
-        frames, missing = write_mjlab_npz(reference, robot, cmd.out, fps)
+    try:
+        if cmd.format == "csv":
+            fps = cmd.fps or 30.0
+            frames = write_dataset_csv(reference, robot.config, cmd.out, fps)
+        else:
+            fps = cmd.fps or reference.fps
+            frames, missing = write_mjlab_npz(reference, robot, cmd.out, fps)
+    except OSError as exc:
+        raise PipelineError(f"cannot write {cmd.out} ({exc.strerror})") from None
     console.print(
         escape(f"wrote {cmd.out}: {frames} frames at {fps:g} fps from {made_by} {folder.name}"), highlight=False
     )

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation, Slerp
 
+from rd_pipeline.files import written_whole
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.robots.config import RobotConfig
 
@@ -50,8 +51,6 @@ def write_dataset_csv(reference: ReferenceMotion, config: RobotConfig, path: Pat
     root_pos, root_quat, joint_pos = resample_root_and_joints(reference, fps)
     columns = joints_by_name(joint_pos, reference.joint_names, config.csv_joints)
     table = np.concatenate([root_pos, root_quat, columns], axis=1)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(f".{path.name}.partial")
-    np.savetxt(partial, table, delimiter=",", fmt="%.9g")
-    partial.replace(path)
+    with written_whole(path) as partial:
+        np.savetxt(partial, table, delimiter=",", fmt="%.9g")
     return len(table)

@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from rd_pipeline.export.motion_csv import joints_by_name, resample_root_and_joints
+from rd_pipeline.files import written_whole
 from rd_pipeline.motion.reference import ReferenceMotion, angular_velocity, body_poses, finite_difference
 from rd_pipeline.paths import ROBOT_CONFIG_DIR
 from rd_pipeline.robots import Robot
@@ -79,9 +80,7 @@ def write_mjlab_npz(reference: ReferenceMotion, robot: Robot, path: Path, fps: f
         "joint_names": np.array(hinges),
         "body_names": np.array([model.body(i).name for i in range(1, model.nbody)]),
     }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(f".{path.name}.partial.npz")
-    np.savez(partial, **arrays)  # type: ignore[arg-type]  # numpy's stub reads ** as allow_pickle
-    partial.replace(path)
+    with written_whole(path, suffix=".npz") as partial:
+        np.savez(partial, **arrays)  # type: ignore[arg-type]  # numpy's stub reads ** as allow_pickle
     missing = [name for name in hinges if name not in reference.joint_names]
     return len(layout), missing
