@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import PROJECT, cli
 
-from rd_pipeline.api.sweeps import Trial, run_sweep, validation_report
+from rd_pipeline.api.sweeps import SHARED_UNTIL, Trial, run_sweep, shared_upstream_args, validation_report
 
 FAST = ("train.iterations=1", "train.clip=0:4")
 """One PPO iteration on 4 s of motion: 4 validation starts per trial."""
@@ -107,3 +107,24 @@ def test_findings_are_judged_by_the_side_of_zero_their_interval_lies_on(monkeypa
     assert judge(all_higher, seeds)["verdict"] == "contradicted"
     seeds["all"] = seeds["all"][:1]
     assert judge(all_lower, seeds)["verdict"] == "not judged (under 2 seeds)"
+
+
+def test_the_shared_upstream_is_made_with_the_overrides_every_trial_of_the_take_has() -> None:
+    arms = [
+        Trial("g1", "dance1_subject2", 0, "a", ("retarget.ik.max_iters=5", "train.env.actions.mode=all")),
+        Trial("g1", "dance1_subject2", 1, "b", ("retarget.ik.max_iters=5", "train.env.actions.mode=absolute")),
+    ]
+    assert shared_upstream_args(arms, "smoke") == [
+        "run",
+        "--robot",
+        "g1",
+        "--motion",
+        "dance1_subject2",
+        "--until",
+        SHARED_UNTIL,
+        "--profile",
+        "smoke",
+        "--set",
+        "retarget.ik.max_iters=5",
+    ]
+    assert "--set" not in shared_upstream_args([Trial("g1", "dance1_subject2", 0)], None)

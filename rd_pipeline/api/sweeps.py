@@ -127,6 +127,17 @@ def run_trial(trial: Trial, profile: str | None, env: dict[str, str], resume: bo
     return done.returncode == 0, time.perf_counter() - began, (lines[-1] if lines and done.returncode else "")
 
 
+def shared_upstream_args(trials: list[Trial], profile: str | None) -> list[str]:
+    """The `rd-pipeline` arguments that make, once, the stages up to `SHARED_UNTIL` the `trials` of
+    one take share: with the overrides every one of them has, so the artifacts are theirs."""
+    first = trials[0]
+    common = [item for item in first.assignments if all(item in trial.assignments for trial in trials)]
+    args = ["run", "--robot", first.robot, "--motion", first.motion, "--until", SHARED_UNTIL]
+    args += ["--profile", profile] if profile else []
+    args += ["--set", *common] if common else []
+    return args
+
+
 def run_sweep(
     trials: list[Trial],
     profile: str | None,
@@ -142,11 +153,7 @@ def run_sweep(
     shared = sorted({(t.robot, t.motion) for t in trials})
     upstream_failed: dict[tuple[str, str], str] = {}
     for robot, motion in shared:
-        done = _cli(
-            ["run", "--robot", robot, "--motion", motion, "--until", SHARED_UNTIL]
-            + (["--profile", profile] if profile else []),
-            env,
-        )
+        done = _cli(shared_upstream_args([t for t in trials if (t.robot, t.motion) == (robot, motion)], profile), env)
         if done.returncode:
             upstream_failed[(robot, motion)] = (done.stderr.strip().splitlines() or ["failed"])[-1]
     runnable = [t for t in trials if (t.robot, t.motion) not in upstream_failed]
