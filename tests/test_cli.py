@@ -75,6 +75,15 @@ def test_a_choice_outside_its_literal_is_refused_when_params_are_read(artifacts:
     assert not (artifacts / "import").exists()
 
 
+def test_a_qp_solver_that_is_not_installed_is_one_line(artifacts: Path) -> None:
+    result = cli("run", "--until", "retarget", "--set", "retarget.ik.solver=osqpx")
+    assert result.returncode == 2
+    last = result.stderr.strip().splitlines()[-1]
+    assert last.startswith("error: retarget.ik.solver 'osqpx' is not an installed QP solver (")
+    assert "daqp" in last
+    assert not (artifacts / "retarget").exists() or not any((artifacts / "retarget").rglob("manifest.json"))
+
+
 @pytest.mark.parametrize(
     ("assignment", "message"),
     [

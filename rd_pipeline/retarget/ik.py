@@ -12,6 +12,7 @@ import qpsolvers
 from scipy.ndimage import maximum_filter1d
 from scipy.spatial.transform import Rotation
 
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.retarget.collision import collision_limit
 from rd_pipeline.retarget.config import IkConfig, IkWeights
 from rd_pipeline.retarget.floor import FloorLimit
@@ -34,6 +35,9 @@ class RetargetIk:
         settings: IkConfig,
         hulls: BodyHulls,
     ) -> None:
+        if settings.solver not in qpsolvers.available_solvers:
+            installed = ", ".join(sorted(qpsolvers.available_solvers))
+            raise PipelineError(f"retarget.ik.solver '{settings.solver}' is not an installed QP solver ({installed})")
         self.robot = robot
         self.targets = targets
         self.settings = settings
@@ -57,6 +61,7 @@ class RetargetIk:
         self.collision_pairs = collision_geom_pairs(robot)
         self.pair_reach = model.geom_rbound[self.collision_pairs].sum(axis=1)
         self.depth_known_at: tuple[np.ndarray, float] | None = None
+        self.frame = 0  # the frame being solved, named when no step is found
         avoidance = collision_limit(robot, settings)
         self.limits: list[mink.Limit] = [self.step_limit, self.floor]
         if avoidance is not None:
@@ -83,6 +88,7 @@ class RetargetIk:
         return q
 
     def _set_frame_targets(self, t: int) -> None:
+        self.frame = t
         self.floor.raise_bodies(self.floor_raise[t])
         # Frames are visited in any order (the lag repair solves backward), so the costs to compare
         # with are the ones the tasks hold, not the previous frame's.
@@ -216,6 +222,11 @@ class RetargetIk:
             self.floor.relaxed = True
             try:
                 return self._solve_qp(tasks)
+            except mink.NoSolutionFound:
+                raise PipelineError(
+                    f"retarget: QP solver '{self.settings.solver}' found no step at frame {self.frame}, "
+                    "even with the floor clearance relaxed"
+                ) from None
             finally:
                 self.floor.relaxed = False
 
