@@ -13,6 +13,7 @@ from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion import too_short
 from rd_pipeline.motion.lafan import LAFAN_CM_TO_M
+from rd_pipeline.params import require_positive
 
 
 @dataclass(frozen=True)
@@ -21,6 +22,9 @@ class ParseConfig:
 
     length_unit_m: float = LAFAN_CM_TO_M
     """Metres per BVH length unit (LAFAN1 is in centimetres)."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "length_unit_m")
 
 
 def _inputs(robot: str | None, motion: str) -> dict[str, Path]:

@@ -32,7 +32,8 @@ class Window:
 
 
 def joint_speed_p95_per_second(reference: ReferenceMotion) -> list[float]:
-    """The 95th percentile of |joint velocity| (rad/s) in each whole second of `reference`."""
+    """The 95th percentile of |joint velocity| (rad/s) in each second of `reference`, the last,
+    partial one included."""
     window = round(reference.fps)
     speeds = np.abs(reference.joint_vel)
     starts = range(0, reference.n_frames, window)

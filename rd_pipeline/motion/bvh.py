@@ -68,7 +68,9 @@ def read_bvh(path: Path) -> BvhClip:
 
 class _Parser:
     def __init__(self, path: Path, lines: list[str]) -> None:
-        self.path, self.lines, self.pos = path, lines, 0
+        self.path = path
+        self.lines = lines
+        self.pos = 0
         self.joints: list[BvhJoint] = []
         self.n_channels = 0
         self.warnings: list[str] = []
@@ -222,11 +224,15 @@ def is_float(token: str) -> bool:
 
 def _axis_rotation(axis: str, angle: np.ndarray) -> np.ndarray:
     """(T, 3, 3) rotations by `angle` (rad) about one coordinate axis."""
-    c, s = np.cos(angle), np.sin(angle)
+    c = np.cos(angle)
+    s = np.sin(angle)
     i, k = {"X": (1, 2), "Y": (2, 0), "Z": (0, 1)}[axis]
     out = np.zeros((angle.shape[0], 3, 3))
     out[:, 3 - i - k, 3 - i - k] = 1.0
-    out[:, i, i], out[:, i, k], out[:, k, i], out[:, k, k] = c, -s, s, c
+    out[:, i, i] = c
+    out[:, i, k] = -s
+    out[:, k, i] = s
+    out[:, k, k] = c
     return out
 
 

@@ -374,10 +374,9 @@ def _orientations(
     # pelvis stands in for it, and the pelvis "up" is vertical by definition of the rest pose (some
     # torso bodies sit right at the pelvis origin).
     robot_rest = {**rest, LOWER_SPINE: rest[PELVIS], TORSO: rest[PELVIS] + np.array([0.0, 0.0, 1.0])}
-    robot_rest_torso = {**robot_rest, TORSO: rest[TORSO]}
     out = {}
-    for joint, frame, rest_points in ((PELVIS, pelvis_frame, robot_rest), (TORSO, torso_frame, robot_rest_torso)):
+    for joint, frame in ((PELVIS, pelvis_frame), (TORSO, torso_frame)):
         body = body_for[joint]
-        offset = frame(rest_points).T @ robot_rest_rotation(robot, body)
+        offset = frame(robot_rest).T @ robot_rest_rotation(robot, body)
         out[body] = frame(human) @ offset
     return out

@@ -22,7 +22,8 @@ class SegmentStats:
     starts: np.ndarray
     """(S,) first frame of each segment."""
     lengths: np.ndarray
-    """(S,) frames in each segment; the last one may be shorter than the rest."""
+    """(S,) frames in each segment; the last one may differ from the rest (a short remainder is
+    merged into it)."""
     joint_names: tuple[str, ...]
     """All reference joints (policy order of the robot config)."""
     joint_std: np.ndarray

@@ -76,7 +76,9 @@ def save_tracked(path: Path, body_pos: np.ndarray, body_quat: np.ndarray, first_
 def log_tracked(rec, model, reference: ReferenceMotion, tracked: Path, offset_m: float = 0.0) -> None:
     """The simulated robot of a `tracked.npz` on the reference's frame timeline, shifted `offset_m` along +y."""
     with open_npz(tracked) as data:
-        body_pos, body_quat, first = data["body_pos"], data["body_quat"], int(data["first_frame"])
+        body_pos = data["body_pos"]
+        body_quat = data["body_quat"]
+        first = int(data["first_frame"])
     names = [n for n in reference.body_names if model.body(n).id > 0]
     ids = [model.body(n).id for n in names]
     log_robot_meshes(

@@ -94,7 +94,9 @@ def log_robot_meshes(
 
 
 def _body_mesh(model: mujoco.MjModel, body_id: int) -> tuple[np.ndarray, np.ndarray]:
-    vertices, faces, count = [], [], 0
+    vertices = []
+    faces = []
+    count = 0
     for geom in range(model.ngeom):
         if model.geom_bodyid[geom] != body_id or model.geom_type[geom] != mujoco.mjtGeom.mjGEOM_MESH:
             continue
