@@ -429,3 +429,41 @@ def test_a_fast_fall_does_not_fold_a_leg_onto_its_alias() -> None:
     assert outcome["config"][1] < 0.10
     assert outcome["model"][0] > 2.0
     assert outcome["model"][1] > 0.20
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        ("no knee", "bodies.retarget must map a body to LAFAN1 joint 'LeftLeg'"),
+        (
+            "feet swapped",
+            "bodies.retarget maps 'left_ankle_roll_link' to 'LeftFoot', but bodies.feet names 'right_ankle_roll_link'",
+        ),
+    ],
+)
+def test_a_retarget_map_the_targets_cannot_use_is_one_line(change: str, message: str) -> None:
+    from rd_pipeline.retarget.quality import FootMeshes
+    from rd_pipeline.retarget.targets import build_targets
+
+    robot = load_robot("g1")
+    config = robot.config
+    if change == "no knee":
+        config = dataclasses.replace(
+            config, retarget_map={b: j for b, j in config.retarget_map.items() if j != "LeftLeg"}
+        )
+    else:
+        config = dataclasses.replace(config, foot_bodies=config.foot_bodies[::-1])
+    broken = dataclasses.replace(robot, config=config)
+    params = RetargetConfig()
+    human = _human("dance1_subject2", seconds=2.0)
+    with pytest.raises(PipelineError) as error:
+        build_targets(
+            human,
+            broken,
+            params.fps,
+            FootMeshes.from_robot(robot).vertices,
+            params.contact,
+            params.shape,
+            params.body_contact,
+        )
+    assert str(error.value) == f"{config.source}: {message}"

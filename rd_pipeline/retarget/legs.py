@@ -17,7 +17,7 @@ def match_stance_width(targets: dict[str, np.ndarray], rest: dict[str, np.ndarra
     asks for feet the robot cannot bring together; the offset is the robot's rest foot width minus
     the clip's median, a constant per leg.
     """
-    for knee, foot in (("LeftLeg", "LeftFoot"), ("RightLeg", "RightFoot")):
+    for knee, foot in zip(KNEES, FEET):
         lateral = np.einsum("ti,ti->t", pelvis[:, :, 1], targets[foot] - targets[PELVIS])
         robot_lateral = float((rest[foot] - rest[PELVIS])[1])  # rest frames are world-aligned
         shift = (robot_lateral - float(np.median(lateral))) * pelvis[:, :, 1]
@@ -49,7 +49,7 @@ def keep_feet_apart(
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
     rest_distance = float(np.linalg.norm((rest[FEET[0]] - rest[FEET[1]])[:2]))
     push = smooth_cover(np.maximum(fraction * rest_distance - distance, 0.0), fps, smoothing_s)
-    for knee, foot, sign in (("LeftLeg", FEET[0], 0.5), ("RightLeg", FEET[1], -0.5)):
+    for knee, foot, sign in zip(KNEES, FEET, (0.5, -0.5)):
         shift = np.zeros_like(targets[foot])
         shift[:, :2] = sign * push[:, None] * direction
         targets[knee] = targets[knee] + shift

@@ -20,7 +20,7 @@ from rd_pipeline.retarget.body_contact import hold_in_contact, label_body_contac
 from rd_pipeline.retarget.config import BodyContactConfig, TargetShaping
 from rd_pipeline.retarget.feet import leg_yaw_range, plant_foot
 from rd_pipeline.retarget.frames import frame_from_axes, yaw_and_pitch
-from rd_pipeline.retarget.lafan_joints import FEET, HIPS_LR, LOWER_SPINE, PELVIS, SHOULDERS_LR, TOES, TORSO
+from rd_pipeline.retarget.lafan_joints import FEET, HIPS_LR, KNEES, LOWER_SPINE, PELVIS, SHOULDERS_LR, TOES, TORSO
 from rd_pipeline.retarget.legs import keep_feet_apart, keep_legs_reachable, match_stance_width
 from rd_pipeline.robots import Robot
 
@@ -186,18 +186,27 @@ def _body_for_joint(robot: Robot, human: HumanMotion) -> dict[str, str]:
     targets need and what the skeleton has."""
     config = robot.config
     body_for = {human_joint: body for body, human_joint in config.retarget_map.items()}
-    for needed in (PELVIS, TORSO, *FEET, *HIPS_LR, *SHOULDERS_LR):
+    for needed in (PELVIS, TORSO, *FEET, *KNEES, *HIPS_LR, *SHOULDERS_LR):
         if needed not in body_for:
             raise PipelineError(f"{config.source}: bodies.retarget must map a body to LAFAN1 joint '{needed}'")
+    for human_joint, foot in zip(FEET, config.foot_bodies):
+        if body_for[human_joint] != foot:
+            raise PipelineError(
+                f"{config.source}: bodies.retarget maps '{body_for[human_joint]}' to '{human_joint}', "
+                f"but bodies.feet names '{foot}'"
+            )
     missing = [j for j in config.retarget_map.values() if j not in human.names]
     if missing:
         raise PipelineError(f"{config.source}: bodies.retarget names human joint '{missing[0]}', not in the skeleton")
+    unread = [j for j in (*TOES, LOWER_SPINE) if j not in human.names]
+    if unread:
+        raise PipelineError(f"the skeleton has no joint '{unread[0]}', which retargeting reads (a LAFAN1 skeleton has)")
     return body_for
 
 
 def _root_scale(pos: np.ndarray, index: dict[str, int], rest: dict[str, np.ndarray]) -> float:
     """Robot over human leg length (hip to knee to ankle, left side): the scale of the root path."""
-    leg = (("LeftUpLeg", "LeftLeg"), ("LeftLeg", "LeftFoot"))
+    leg = ((HIPS_LR[0], KNEES[0]), (KNEES[0], FEET[0]))
     leg_human = sum(_median_length(pos, index, a, b) for a, b in leg)
     leg_robot = sum(np.linalg.norm(rest[a] - rest[b]) for a, b in leg)
     return float(leg_robot / leg_human)
