@@ -127,6 +127,30 @@ def test_bad_csv_lines_are_named(tmp_path: Path) -> None:
     assert not list((tmp_path / "store" / "import" / "h1" / "dance1_subject1").glob("[!.]*"))
 
 
+@pytest.mark.parametrize(
+    ("damage", "message"),
+    [
+        ("inf", "{path}:7: non-finite value 'inf'"),
+        ("quaternion", "{path}:7: root quaternion has norm 0.000"),
+        ("latin-1", "{path}: not a text CSV (invalid continuation byte at byte 0)"),
+    ],
+)
+def test_a_damaged_csv_is_named_at_its_file_line(damage: str, message: str, tmp_path: Path) -> None:
+    """Blank lines count: line numbers are the file's, not the rows'."""
+    rows = (RETARGETED_DIR / "h1" / "dance1_subject1.csv").read_text().splitlines()[:20]
+    fields = rows[4].split(",")
+    if damage == "inf":
+        fields[8] = "inf"
+    elif damage == "quaternion":
+        fields[3:7] = ["0", "0", "0", "0"]
+    text = "\n".join(["", "", *rows[:4], ",".join(fields), "", *rows[5:]]) + "\n"
+    path = tmp_path / "dance1_subject1.csv"
+    path.write_bytes(b"\xe9" + text.encode() if damage == "latin-1" else text.encode())
+    with pytest.raises(PipelineError) as error:
+        import_retargeted_csv(path, load_robot("h1"), 30.0, 50.0, "cubic", ContactThresholds())
+    assert str(error.value) == message.format(path=path)
+
+
 def test_cli_import_writes_the_reference_artifact(artifacts: Path) -> None:
     result = cli("stage", "import", "--robot", "h1_2", "--motion", "dance2_subject4")
     assert result.returncode == 0, result.stderr

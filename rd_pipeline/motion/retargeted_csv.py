@@ -32,27 +32,47 @@ class CsvImportResult:
     """What was read but repaired (renormalised quaternions), one line each."""
 
 
-def read_retargeted_csv(path: Path, n_joints: int) -> np.ndarray:
-    """(T, 7 + n_joints) rows; any malformed row is reported with its line number."""
+@dataclass(frozen=True)
+class CsvTable:
+    """The numbers of a dataset CSV and where each row stands in the file."""
+
+    rows: np.ndarray
+    """(T, 7 + joints) root position, root quaternion (xyzw), joint positions."""
+    line_numbers: np.ndarray
+    """(T,) the file line of each row (blank lines are skipped)."""
+
+
+def read_retargeted_csv(path: Path, n_joints: int) -> CsvTable:
+    """The rows of a dataset CSV; a malformed row is reported with its line number."""
     rows = []
-    with path.open() as handle:
-        for line_no, line in enumerate(handle, start=1):
-            if not line.strip():
-                continue
-            parts = line.strip().split(",")
-            if len(parts) != 7 + n_joints:
-                raise PipelineError(f"{path}:{line_no}: expected {7 + n_joints} values, got {len(parts)}")
-            try:
-                row = [float(p) for p in parts]
-            except ValueError:
-                bad = next(p for p in parts if not is_float(p))
-                raise PipelineError(f"{path}:{line_no}: non-numeric value '{bad}'") from None
-            if not np.all(np.isfinite(row)):
-                raise PipelineError(f"{path}:{line_no}: non-finite value")
-            rows.append(row)
+    line_numbers = []
+    try:
+        with path.open() as handle:
+            for line_no, line in enumerate(handle, start=1):
+                if not line.strip():
+                    continue
+                rows.append(_parse_row(path, line_no, line, n_joints))
+                line_numbers.append(line_no)
+    except UnicodeDecodeError as exc:
+        raise PipelineError(f"{path}: not a text CSV ({exc.reason} at byte {exc.start})") from None
     if len(rows) < 2:
         raise PipelineError(f"{path}: needs at least 2 frames, got {len(rows)}")
-    return np.array(rows)
+    return CsvTable(np.array(rows), np.array(line_numbers))
+
+
+def _parse_row(path: Path, line_no: int, line: str, n_joints: int) -> list[float]:
+    parts = line.strip().split(",")
+    if len(parts) != 7 + n_joints:
+        raise PipelineError(f"{path}:{line_no}: expected {7 + n_joints} values, got {len(parts)}")
+    try:
+        row = [float(p) for p in parts]
+    except ValueError:
+        bad = next(p for p in parts if not is_float(p))
+        raise PipelineError(f"{path}:{line_no}: non-numeric value '{bad}'") from None
+    unusable = [p for p, value in zip(parts, row) if not np.isfinite(value)]
+    if unusable:
+        raise PipelineError(f"{path}:{line_no}: non-finite value '{unusable[0]}'")
+    return row
 
 
 def import_retargeted_csv(
@@ -65,12 +85,13 @@ def import_retargeted_csv(
 ) -> CsvImportResult:
     """Map dataset columns onto the robot by joint name, resample to `target_fps`, complete by FK."""
     config = robot.config
-    table = read_retargeted_csv(path, len(config.csv_joints))
+    csv = read_retargeted_csv(path, len(config.csv_joints))
+    table = csv.rows
     quat_norm = np.linalg.norm(table[:, 3:7], axis=1)
     if np.any(quat_norm < 0.5):
-        line = int(np.argmax(quat_norm < 0.5)) + 1
-        raise PipelineError(f"{path}:{line}: root quaternion has norm {quat_norm[line - 1]:.3f}")
-    warnings = _renormalised(path, quat_norm)
+        row = int(np.argmax(quat_norm < 0.5))
+        raise PipelineError(f"{path}:{csv.line_numbers[row]}: root quaternion has norm {quat_norm[row]:.3f}")
+    warnings = _renormalised(path, quat_norm, csv.line_numbers)
     columns = {name: 7 + i for i, name in enumerate(config.csv_joints)}
     missing = [j for j in config.joint_names if j not in columns]
     if missing:
@@ -104,13 +125,13 @@ def import_retargeted_csv(
     return CsvImportResult(reference=reference, dropped_joints=dropped, source_frames=n_source, warnings=warnings)
 
 
-def _renormalised(path: Path, quat_norm: np.ndarray) -> tuple[str, ...]:
+def _renormalised(path: Path, quat_norm: np.ndarray, line_numbers: np.ndarray) -> tuple[str, ...]:
     """A warning counting the root quaternions that are not of unit norm (Slerp normalises them)."""
     off = np.abs(quat_norm - 1.0) > QUATERNION_NORM_TOLERANCE
     if not off.any():
         return ()
-    line = int(np.argmax(off)) + 1
+    row = int(np.argmax(off))
     return (
         f"{path}: {int(off.sum())} of {len(quat_norm)} root quaternions are not of unit norm and were "
-        f"renormalised (first at line {line}, norm {quat_norm[line - 1]:.3f})",
+        f"renormalised (first at line {line_numbers[row]}, norm {quat_norm[row]:.3f})",
     )
