@@ -45,7 +45,7 @@ def summarize(rollouts: list[Rollout], control_hz: float) -> dict[str, float | N
     return out
 
 
-def drift(rollouts: list[Rollout], rng: np.random.Generator, resamples: int = 1000) -> list[dict[str, float | None]]:
+def drift(rollouts: list[Rollout], rng: np.random.Generator, resamples: int) -> list[dict[str, float | None]]:
     """E_g_mpbpe in `DRIFT_BINS` relative time bins of each rollout, with a bootstrap 95% CI.
 
     Each rollout contributes its mean error per bin; the CI resamples rollouts (or, with a single
@@ -65,7 +65,7 @@ def drift(rollouts: list[Rollout], rng: np.random.Generator, resamples: int = 10
     return out
 
 
-def bootstrap_ci(values: np.ndarray, rng: np.random.Generator, resamples: int = 1000) -> tuple[float, float]:
+def bootstrap_ci(values: np.ndarray, rng: np.random.Generator, resamples: int) -> tuple[float, float]:
     """Percentile 95% interval of the mean."""
     if len(values) == 1:
         return float(values[0]), float(values[0])

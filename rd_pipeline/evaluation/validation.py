@@ -145,7 +145,7 @@ def validate_policy(
     with _torch_threads(1):
         for name in CONTROLLERS:
             done = rollouts(name, [model] * len(starts))
-            nominal[name] = _nominal_summary(done, control_hz, rng)
+            nominal[name] = _nominal_summary(done, control_hz, rng, config.bootstrap_resamples)
             first[name] = done[0]
             advance(name)
         randomized = _randomized_summary(model, len(starts), config.randomized_seeds, rollouts, control_hz, advance)
@@ -194,11 +194,13 @@ def _protocol_details(config: ValidationConfig, starts: int) -> dict[str, Any]:
     }
 
 
-def _nominal_summary(rollouts: list[Rollout], control_hz: float, rng: np.random.Generator) -> dict[str, Any]:
+def _nominal_summary(
+    rollouts: list[Rollout], control_hz: float, rng: np.random.Generator, resamples: int
+) -> dict[str, Any]:
     return {
         "fixed_grid": summarize(rollouts, control_hz),
         "start_zero": summarize(rollouts[:1], control_hz),
-        "drift": drift(rollouts, rng),
+        "drift": drift(rollouts, rng, resamples),
         "per_start": {
             "start_s": [r.start_frame / control_hz for r in rollouts],
             "survival_s": [r.steps / control_hz for r in rollouts],

@@ -20,6 +20,8 @@ class ValidationConfig:
     """Also evaluate on randomized physics, once per seed (empty: nominal only)."""
     bootstrap_seed: int = 0
     """Seeds the bootstrap of the drift CI."""
+    bootstrap_resamples: int = 1000
+    """Resamples of the drift CI's bootstrap."""
     recorded_observations: int = 2000
     """Observations of the policy's rollouts kept to compare the two runtimes on."""
     runtime: Literal["torchscript", "onnx"] = "torchscript"
@@ -27,4 +29,4 @@ class ValidationConfig:
     other one is checked against it on the observations the loop recorded."""
 
     def __post_init__(self) -> None:
-        require_positive(self, "recorded_observations")
+        require_positive(self, "recorded_observations", "bootstrap_resamples")
