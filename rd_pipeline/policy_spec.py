@@ -81,6 +81,16 @@ class PolicySpec:
 
 
 def _check(data: Any, source: Path) -> None:
+    _check_schema(data, source)
+    if data["format_version"] != FORMAT_VERSION:
+        raise PipelineError(f"{source}: format_version {data['format_version']} is not {FORMAT_VERSION}")
+    _check_joints(data["joints"], source)
+    _check_action(data["action"], data["joints"]["policy"], source)
+    _check_observation(data["observation"], source)
+
+
+def _check_schema(data: Any, source: Path) -> None:
+    """Every field of `SCHEMA` is there, of its type."""
     for dotted, kind in SCHEMA.items():
         value: Any = data
         for depth, part in enumerate(dotted.split(".")):
@@ -96,40 +106,44 @@ def _check(data: Any, source: Path) -> None:
                 raise PipelineError(f"{source}: field '{dotted}' must be a list of {_name(element)}")
         elif not isinstance(value, kind) or isinstance(value, bool):
             raise PipelineError(f"{source}: field '{dotted}' must be {_name(kind)}, got {value!r}")
-    if data["format_version"] != FORMAT_VERSION:
-        raise PipelineError(f"{source}: format_version {data['format_version']} is not {FORMAT_VERSION}")
-    joints = data["joints"]
+
+
+def _check_joints(joints: dict[str, Any], source: Path) -> None:
+    """One value per actuated joint, or per policy joint, in each per-joint list."""
     for dotted in _PER_ACTUATED + _PER_POLICY:
         expected = len(joints["actuated"] if dotted in _PER_ACTUATED else joints["policy"])
         if len(joints[dotted.split(".")[1]]) != expected:
             raise PipelineError(
                 f"{source}: field '{dotted}' has {len(joints[dotted.split('.')[1]])} values, expected {expected}"
             )
-    action = data["action"]
-    if len(action["semantics"]) != len(joints["policy"]):
+
+
+def _check_action(action: dict[str, Any], policy: list[str], source: Path) -> None:
+    """A known semantics per policy joint, and outputs for exactly the joints the policy drives."""
+    if len(action["semantics"]) != len(policy):
         raise PipelineError(
-            f"{source}: field 'action.semantics' has {len(action['semantics'])} values, "
-            f"expected {len(joints['policy'])}"
+            f"{source}: field 'action.semantics' has {len(action['semantics'])} values, expected {len(policy)}"
         )
     for kind in action["semantics"]:
         if kind not in SEMANTICS:
             raise PipelineError(f"{source}: field 'action.semantics' has '{kind}' (allowed: {', '.join(SEMANTICS)})")
-    driven = [joint for joint, kind in zip(joints["policy"], action["semantics"]) if kind != "reference"]
+    driven = [joint for joint, kind in zip(policy, action["semantics"]) if kind != "reference"]
     if action["outputs"] != driven:
         raise PipelineError(
             f"{source}: field 'action.outputs' must list the policy joints whose semantics "
             "is not 'reference', in policy order"
         )
-    terms = data["observation"]["terms"]
+
+
+def _check_observation(observation: dict[str, Any], source: Path) -> None:
+    """Terms with a name, size and scale, summing to the frame and, with the history, the whole."""
+    terms = observation["terms"]
     for i, term in enumerate(terms):
         for name, kind in (("name", str), ("size", int), ("scale", _NUMBER)):
             if not isinstance(term.get(name), kind):
                 raise PipelineError(f"{source}: field 'observation.terms[{i}].{name}' is missing or not {_name(kind)}")
     frame = sum(t["size"] for t in terms)
-    if (
-        frame != data["observation"]["frame_size"]
-        or frame * data["observation"]["history"] != data["observation"]["size"]
-    ):
+    if frame != observation["frame_size"] or frame * observation["history"] != observation["size"]:
         raise PipelineError(f"{source}: field 'observation.size' does not match its terms and history")
 
 
