@@ -195,9 +195,11 @@ def test_keypoint_error(g1) -> None:
     quality = retarget_quality(g1, reference, keypoint_targets=shifted, keypoint_bodies=bodies, frames_per_s=123.4)
     assert quality["keypoint_error_mean_mm"] == pytest.approx(30.0, abs=1e-3)
     assert quality["fps_frames_per_s"] == 123.4
-    with pytest.raises(PipelineError, match="shape"):
+    n = reference.n_frames
+    wrong_shape = rf"^keypoint_targets has shape \({n}, 2, 3\), expected \({n}, {len(bodies)}, 3\)$"
+    with pytest.raises(PipelineError, match=wrong_shape):
         retarget_quality(g1, reference, keypoint_targets=exact[:, :2], keypoint_bodies=bodies)
-    with pytest.raises(PipelineError, match="not among"):
+    with pytest.raises(PipelineError, match=r"^keypoint body 'nose' is not among the reference's bodies$"):
         retarget_quality(g1, reference, keypoint_targets=exact, keypoint_bodies=["left_elbow_link", "nose", "pelvis"])
 
 

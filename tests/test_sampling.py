@@ -46,7 +46,9 @@ def test_segments_cover_every_frame() -> None:
 def test_histograms_are_normalized(stats: SegmentStats) -> None:
     assert stats.histograms.shape == (stats.n_segments, 4, 20)
     assert np.allclose(stats.histograms.sum(axis=2), 1.0)
-    assert stats.lengths.sum() == int(round(stats.lengths.sum()))
+    # The segments tile the whole take: G1 dance1_subject2 (6575 frames at 50 Hz) or H1-2 dance2_subject4 (11285).
+    assert stats.starts[0] == 0 and np.array_equal(stats.starts[1:], np.cumsum(stats.lengths)[:-1])
+    assert stats.lengths.sum() in (6575, 11285)
 
 
 def test_prior_is_on_the_simplex_and_flattens_every_joint(stats: SegmentStats) -> None:
