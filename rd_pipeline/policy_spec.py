@@ -71,11 +71,6 @@ class PolicySpec:
             value = value[part]
         return value
 
-    @property
-    def decimation(self) -> int:
-        """Physics steps per control step."""
-        return round(self.get("rates.physics_hz") / self.get("rates.control_hz"))
-
     def save(self, path: Path) -> None:
         path.write_text(json.dumps(self.data, indent=2) + "\n")
 

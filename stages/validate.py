@@ -47,7 +47,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="validate",
-    version=6,
+    version=7,
     description="exported policy + reference -> sim2sim report (report.json/md, plots, .rrd) beside zero-action",
     params=ValidationConfig,
     provides="validation_report",

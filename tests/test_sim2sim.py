@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import RETARGETED_DIR
 
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.deploy import reference_baseline_spec
 from rd_pipeline.evaluation.protocol import Protocol
 from rd_pipeline.evaluation.sim2sim import BodySets, Rollout, run_rollouts
@@ -49,7 +50,7 @@ def standing() -> Standing:
     )
     rc = robot.config
     bodies = BodySets(rc.root_body, rc.tracking_bodies, rc.termination_bodies, rc.foot_bodies)
-    return Standing(reference, spec, deploy_model(spec), bodies)
+    return Standing(reference, spec, deploy_model(spec, Protocol().physics_hz), bodies)
 
 
 def _rollout(standing: Standing, reference: ReferenceMotion) -> Rollout:
@@ -89,3 +90,18 @@ def test_a_reference_that_tips_over_ends_the_rollout_as_tilted(standing: Standin
     rollout = _rollout(standing, dataclasses.replace(reference, body_quat_w=body_quat))
     assert rollout.ended_by == "tilted"
     assert rollout.steps == BROKEN_AT
+
+
+def test_validation_steps_the_paper_s_500_hz_whatever_rate_the_policy_trained_at() -> None:
+    robot = load_robot("g1")
+    mjlab_rate = EnvConfig(physics_dt=0.005, decimation=4)  # 200 Hz physics, 50 Hz policy
+    spec = build_policy_spec(robot, mjlab_rate, len(robot.config.policy_joints), "import", "k", (0, 100))
+    assert spec.get("rates.physics_hz") == 200.0
+    protocol = Protocol()
+    assert deploy_model(spec, protocol.physics_hz).opt.timestep == 0.002
+    assert protocol.substeps(spec.get("rates.control_hz")) == 10
+    with pytest.raises(PipelineError) as error:
+        Protocol(physics_hz=333.0).substeps(50.0)
+    assert str(error.value) == (
+        "validate.protocol.physics_hz 333 is not a whole multiple of the policy's 50 Hz control rate"
+    )

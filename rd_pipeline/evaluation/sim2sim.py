@@ -92,6 +92,7 @@ def run_rollouts(
     the first rollout also keeps its body poses for the recording."""
     count = len(start_frames)
     dt = 1.0 / spec.get("rates.control_hz")
+    substeps = protocol.substeps(spec.get("rates.control_hz"))
     model = models[0]
     physics = MujocoCpuBackend(models, protocol.threads)
     state = physics.state
@@ -112,7 +113,7 @@ def run_rollouts(
     while alive.any():
         action = policy(obs.astype(np.float32))
         ctrl = controller.targets(action)
-        physics.step(torch.from_numpy(ctrl), spec.decimation, active=torch.from_numpy(alive))
+        physics.step(torch.from_numpy(ctrl), substeps, active=torch.from_numpy(alive))
         qpos = state.qpos.numpy().copy()
         qvel = state.qvel.numpy().copy()
         xpos = state.body_pos.numpy().copy()

@@ -73,8 +73,8 @@ def load_exported_spec(folder: Path, reference_key: str) -> PolicySpec:
     return spec
 
 
-def deploy_model(spec: PolicySpec) -> mujoco.MjModel:
-    """The robot's full-mesh model with the exported PD gains and the exported physics rate."""
+def deploy_model(spec: PolicySpec, physics_hz: float) -> mujoco.MjModel:
+    """The robot's full-mesh model with the exported PD gains, stepping at `physics_hz`."""
     joints = spec.get("joints")
     return pd_simulation_model(
         asset_path(spec.get("mjcf")),
@@ -82,7 +82,7 @@ def deploy_model(spec: PolicySpec) -> mujoco.MjModel:
         np.array(joints["kp"]),
         np.array(joints["kd"]),
         np.array(joints["effort_limit"]),
-        1.0 / spec.get("rates.physics_hz"),
+        1.0 / physics_hz,
     )
 
 
@@ -126,11 +126,12 @@ def validate_policy(
     """Run the protocol from every fixed-grid start with the policy and zero action, on nominal and
     (per seed) randomized physics; `advance` is called after each batch of rollouts."""
     spec = load_exported_spec(exported, clip.key)
-    model = deploy_model(spec)
+    model = deploy_model(spec, config.protocol.physics_hz)
     controllers = _Controllers(exported, spec, config)
     rc = robot.config
     bodies = BodySets(rc.root_body, rc.tracking_bodies, rc.termination_bodies, rc.foot_bodies)
     control_hz = spec.get("rates.control_hz")
+    config.protocol.substeps(control_hz)  # a rate the policy's cannot divide is refused before any rollout
     step = max(1, round(config.protocol.grid_s * control_hz))
     starts = np.arange(0, clip.motion.n_frames - 1, step)
 
@@ -155,7 +156,11 @@ def validate_policy(
         "motion": motion,
         "policy_key": policy_key,
         "reference": _reference_details(clip),
-        "rates": spec.get("rates"),
+        "rates": {
+            "control_hz": control_hz,
+            "physics_hz": config.protocol.physics_hz,
+            "trained_physics_hz": spec.get("rates.physics_hz"),
+        },
         "protocol": _protocol_details(config, len(starts)),
         "nominal": nominal,
         "runtime": {"ran": config.runtime, "observations_compared": compared, "onnx_vs_torchscript_max_abs_diff": gap},
