@@ -11,7 +11,7 @@ from conftest import RETARGETED_DIR
 
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.rl.physics import MujocoRolloutBackend
+from rd_pipeline.rl.physics import MujocoCpuBackend, MujocoRolloutBackend
 from rd_pipeline.rl.physics.state import body_velocities
 from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
@@ -72,3 +72,30 @@ def test_batched_stepping_equals_sequential_mj_step() -> None:
     feet = [robot.body_ids[f] for f in robot.config.foot_bodies]
     assert state.contact_force[:, feet, 2].sum() > 0  # the soles carry weight
     backend.close()
+
+
+def test_the_cpu_backend_resumes_from_its_states_bit_for_bit() -> None:
+    """A checkpoint keeps the solver's warm start: stepping on from restored states is the same, to
+    the last bit, as stepping on without the interruption."""
+    robot = load_robot("g1")
+    reference = import_retargeted_csv(
+        RETARGETED_DIR / "g1" / "dance1_subject2.csv", robot, 30.0, 50.0, "cubic", ContactThresholds()
+    ).reference
+    model = simulation_model(robot)
+    joints = [model.jnt_qposadr[model.joint(j).id] for j in robot.config.joint_names]
+    qpos = np.tile(model.qpos0, (2, 1))
+    qpos[:, :3] = reference.root_pos[[0, 300]]
+    qpos[:, 3:7] = reference.root_quat[[0, 300]]
+    qpos[:, joints] = reference.joint_pos[[0, 300]]
+    straight = MujocoCpuBackend([model, model], threads=1)
+    straight.set_state(torch.arange(2), torch.from_numpy(qpos), torch.zeros(2, model.nv, dtype=torch.float64))
+    ctrl = lambda step: torch.from_numpy(reference.joint_pos[[step, 300 + step]])
+    for step in range(3):
+        straight.step(ctrl(step), 10)
+    resumed = MujocoCpuBackend([model, model], threads=1)
+    resumed.set_states(straight.get_states())
+    for step in range(3, 8):
+        straight.step(ctrl(step), 10)
+        resumed.step(ctrl(step), 10)
+    assert torch.equal(straight.state.qpos, resumed.state.qpos)
+    assert torch.equal(straight.state.qvel, resumed.state.qvel)

@@ -15,6 +15,10 @@ import torch
 
 from rd_pipeline.rl.physics.state import PhysicsState, body_velocities, state_buffers
 
+CHECKPOINT_STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS | mujoco.mjtState.mjSTATE_WARMSTART
+"""What a checkpoint keeps of each world: with the solver's warm start, or a resumed run's next
+step starts the solver cold where the uninterrupted one did not, and the two part in the last digits."""
+
 
 class MujocoCpuBackend:
     """N environments, each with its own `MjModel` (domain randomization) and `MjData`."""
@@ -104,7 +108,7 @@ class MujocoCpuBackend:
 
     def get_states(self) -> np.ndarray:
         """(N, S) full physics state of every environment (for checkpoints)."""
-        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        spec = CHECKPOINT_STATE
         size = mujoco.mj_stateSize(self.models[0], spec)
         out = np.empty((self.num_envs, size))
         for i, (model, data) in enumerate(zip(self.models, self.datas)):
@@ -112,7 +116,7 @@ class MujocoCpuBackend:
         return out
 
     def set_states(self, states: np.ndarray) -> None:
-        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        spec = CHECKPOINT_STATE
         for i, (model, data) in enumerate(zip(self.models, self.datas)):
             mujoco.mj_setState(model, data, states[i], spec)
             mujoco.mj_forward(model, data)
