@@ -84,7 +84,9 @@ def summed(ranks: Ranks, values: list[float]) -> list[float]:
     """`values` summed over the ranks (float64, so counts stay exact)."""
     if not ranks.distributed:
         return values
-    tensor = torch.tensor(values, dtype=torch.float64)
+    # NCCL reduces only tensors on this rank's GPU.
+    device = torch.device("cuda", torch.cuda.current_device()) if dist.get_backend() == "nccl" else None
+    tensor = torch.tensor(values, dtype=torch.float64, device=device)
     dist.all_reduce(tensor)
     return tensor.tolist()
 

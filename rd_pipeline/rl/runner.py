@@ -126,6 +126,9 @@ class TrainingRunner:
             config.env.device,
             ranks,
         )
+        if ranks.distributed:
+            # The weights are rank 0's; the action noise, drawn from torch's generator, is each rank's own.
+            torch.manual_seed(seed)
         self.scoring_env: TrackingEnv | None = None
         if ranks.leader:
             self.scoring_env = TrackingEnv(

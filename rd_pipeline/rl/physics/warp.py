@@ -197,7 +197,8 @@ class MujocoWarpBackend:
         """The modules, for benchmarks that drive the model and data themselves."""
         self.models = models
         self.num_envs = len(models)
-        self.warp_device = "cuda:0" if device == "cuda" else device
+        # Plain `cuda` is the current GPU, as for torch: each rank of a data-parallel run set its own.
+        self.warp_device = f"cuda:{torch.cuda.current_device()}" if device == "cuda" else device
         self.device = torch.device(self.warp_device)
         self.capture_fallback_reason = self._graphs_blocker(cpu_graphs)
         """Why the physics launches kernel by kernel instead of replaying graphs (None: graphs)."""
