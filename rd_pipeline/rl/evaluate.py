@@ -57,15 +57,20 @@ def scoring_starts(n_frames: int, count: int) -> torch.Tensor:
 def checkpoint_scorer(env: TrackingEnv, policy: Callable[[TensorDict], torch.Tensor]) -> Callable[[], dict[str, float]]:
     """Scores the policy as it is when called: start-zero survival (s) and completion (the mean
     fraction of the motion left that it survives) from one start per environment of `env`, a
-    nominal environment of its own. Each call starts the environment over from its state when the
-    scorer was made (curricula, sigmas, generator), so a checkpoint's score depends on its weights alone."""
+    nominal environment of its own. Each call starts the environment and its sampler over from their
+    state when the scorer was made (curricula, sigmas, generators, failure statistics), so a
+    checkpoint's score depends on its weights alone."""
     fresh = env.state_dict()
+    # Worlds that have ended respawn where the sampler says, and their episodes move the curricula
+    # the live ones fail by: the sampler starts over too.
+    fresh_sampler = env.sampler.state_dict()
     starts = scoring_starts(env.max_episode_length, env.num_envs)
     # The last frame ends an episode, so from frame f the most there is to survive is n - 1 - f steps.
     left_s = (env.max_episode_length - 1 - starts) / env.control_hz
 
     def score() -> dict[str, float]:
         env.load_state_dict(fresh)
+        env.sampler.load_state_dict(fresh_sampler)
         seconds = survival(env, policy, starts)
         return {
             "start_zero_s": round(float(seconds[0]), 2),
