@@ -30,6 +30,8 @@ class TargetShaping:
     """Height the lowest point of a swinging foot clears the floor by, once lifted."""
     swing_lift_time_s: float = 0.1
     """Time a swing foot takes to rise to its clearance before it travels (and to come down after)."""
+    swing_turn_time_s: float = 0.1
+    """Time a foot takes to turn from its flat planted orientation to the human foot's in swing (and back)."""
     reach_fraction: float = 0.97
     """Fraction of the straight-leg length a leg may use; beyond it the body is lowered (`keep_legs_reachable`)."""
     min_stance_fraction: float = 0.6

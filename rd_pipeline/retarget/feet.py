@@ -10,7 +10,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from rd_pipeline.motion.contact import contact_runs
-from rd_pipeline.retarget.config import PlantDrift
+from rd_pipeline.retarget.config import PlantDrift, TargetShaping
 from rd_pipeline.retarget.frames import yaw_and_pitch, yaw_pitch_frame
 from rd_pipeline.retarget.smoothing import smoothstep
 from rd_pipeline.robots import Robot
@@ -45,26 +45,25 @@ def plant_foot(
     contact: np.ndarray,
     sole_vertices: np.ndarray,
     fps: float,
-    clearance: float,
-    lift_time_s: float,
     pelvis_yaw: np.ndarray,
     yaw_range: tuple[float, float],
-    tilt_limit: float,
-    drift: PlantDrift,
     human_path: np.ndarray,
+    shape: TargetShaping,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Foot targets: fixed and flat while planted; in swing, the human path bent to meet the plants.
     Returns positions, rotations, the height the sole clears the floor by (0 while planted) and
     the contact labels the plants were made from.
 
-    A plant ends where the foot target has drifted `drift.target_m` from it while the human foot
-    (`human_path`, scaled like the pelvis) has slid `drift.human_m` (a shuffle step too low and
-    slow to lift the contact label): a short swing carries the foot to a new plant.
+    A plant ends where the foot target has drifted `shape.plant_drift.target_m` from it while the
+    human foot (`human_path`, scaled like the pelvis) has slid `plant_drift.human_m` (a shuffle
+    step too low and slow to lift the contact label): a short swing carries the foot to a new plant.
 
     Swing orientation follows the human foot joint (its toe line is useless as a heading when the
     foot points down), through the constant offset that makes it flat and aligned during plants.
     """
     n = free.shape[0]
+    drift = shape.plant_drift
+    clearance = shape.swing_clearance_m
     sole = float(-sole_vertices[:, 2].min())
     half_swing = max(1, round(0.5 * drift.swing_s * fps))
     contact = _split_drifting_plants(contact, free, human_path, drift, half_swing)
@@ -72,13 +71,13 @@ def plant_foot(
     heading = _planted_heading(forward, plants, pelvis_yaw, yaw_range)
     flat = Rotation.from_matrix(yaw_pitch_frame(heading, np.zeros(n)))
     swinging = _swing_orientation(human_rotation, flat, contact)
-    flat = _keep_planted_tilt(flat, swinging, plants, tilt_limit)
+    flat = _keep_planted_tilt(flat, swinging, plants, shape.planted_tilt_rad)
     position = free.copy()
     for plant in plants:
         position[plant.start : plant.end] = plant.point
     lift = np.zeros(n)
-    ramp = max(1, int(round(0.1 * fps)))
-    rise = max(1, int(round(lift_time_s * fps)))
+    ramp = max(1, int(round(shape.swing_turn_time_s * fps)))
+    rise = max(1, int(round(shape.swing_lift_time_s * fps)))
     for swing in _swings(plants, n):
         offsets = _swing_offsets(swing, free)
         if offsets is None:  # no contact in the whole clip: only keep feet above ground

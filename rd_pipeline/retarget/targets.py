@@ -299,13 +299,10 @@ def _plant_feet(
             foot_contact[:, side],
             foot_vertices[side],
             clip.fps,
-            shape.swing_clearance_m,
-            shape.swing_lift_time_s,
             pelvis_yaw,
             leg_yaw_range(clip.robot, clip.body_for[foot]),
-            shape.planted_tilt_rad,
-            shape.plant_drift,
             0.5 * (clip.human(foot) + clip.human(toe)) * clip.root_scale,
+            shape,
         )
         targets[foot] = position
         offset = robot_rest_rotation(clip.robot, clip.body_for[foot])
