@@ -94,7 +94,6 @@ def check_against_model(config: RobotConfig, model: mujoco.MjModel) -> None:
         "bodies.root": [config.root_body],
         "bodies.feet": list(config.foot_bodies),
         "bodies.tracking": list(config.tracking_bodies),
-        "bodies.keypoints": list(config.keypoint_bodies),
         "bodies.termination": list(config.termination_bodies),
         "bodies.retarget": list(config.retarget_map),
         "collision.pairs": [body for pair in config.collision_pairs for body in pair],
