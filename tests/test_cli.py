@@ -94,6 +94,10 @@ def test_a_qp_solver_that_is_not_installed_is_one_line(artifacts: Path) -> None:
         ("train.seed=1.5", "parameter 'train.seed' must be an integer, got '1.5'"),
         ("train.ppo.gamma=1.5", "parameter 'train.ppo.gamma' must be at most 1, got 1.5"),
         (
+            "import.contact.ground_percentile=101",
+            "parameter 'import.contact.ground_percentile' must be at most 100, got 101.0",
+        ),
+        (
             "train.env.rewards.body_pos.sigma=0",
             "parameter 'train.env.rewards.body_pos.sigma' must be positive, got 0.0",
         ),

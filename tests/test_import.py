@@ -90,6 +90,17 @@ def test_contacts_alternate_between_feet(h1_2_dance2) -> None:
     assert left_only > 0.05 and right_only > 0.05
 
 
+def test_ground_percentile_sets_the_ground_the_feet_stand_on(h1_2_dance2) -> None:
+    reference, _ = h1_2_dance2
+    csv = RETARGETED_DIR / "h1_2" / "dance2_subject4.csv"
+    lowest = ContactThresholds(ground_percentile=0.0)
+    on_lowest = import_retargeted_csv(csv, load_robot("h1_2"), 30.0, 50.0, "cubic", lowest).reference
+    # The single lowest foot frame lies below the floor the dancer stands on: measured from it, a
+    # planted foot hovers above the enter height in half of the frames the default calls planted.
+    assert reference.foot_contact.mean() == pytest.approx(0.381, abs=0.005)
+    assert on_lowest.foot_contact.mean() == pytest.approx(0.208, abs=0.005)
+
+
 def test_g1_maps_29_dof_dataset_by_name() -> None:
     result = _import("g1", "dance1_subject2")
     assert result.dropped_joints == (

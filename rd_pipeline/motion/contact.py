@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rd_pipeline.params import require_at_most
+
 
 @dataclass(frozen=True)
 class ContactThresholds:
@@ -19,6 +21,13 @@ class ContactThresholds:
     """A planted foot lifts off above this height ..."""
     exit_speed_m_s: float = 0.5
     """... or when it moves horizontally faster than this."""
+    ground_percentile: float = 1.0
+    """Percentile of the clip's own foot heights taken as its ground, so that a few frames of foot
+    noise below the floor do not raise every height; bodies measured against LAFAN1's floor (z = 0)
+    do not use it."""
+
+    def __post_init__(self) -> None:
+        require_at_most(self, 100.0, "ground_percentile")
 
 
 def label_contacts(foot_pos: np.ndarray, fps: float, ground_z: float, thresholds: ContactThresholds) -> np.ndarray:

@@ -119,7 +119,7 @@ def import_retargeted_csv(
     foot_idx = [reference.body_names.index(b) for b in config.foot_bodies]
     foot_pos = reference.body_pos_w[:, foot_idx]
     # The dataset's feet are not at z = 0; take its own lowest foot height as the ground.
-    ground_z = float(np.percentile(foot_pos[..., 2].min(axis=1), 1.0))
+    ground_z = float(np.percentile(foot_pos[..., 2].min(axis=1), contact.ground_percentile))
     labels = label_contacts(foot_pos, target_fps, ground_z, contact)
     reference = dataclasses.replace(reference, foot_contact=labels)
     return CsvImportResult(reference=reference, dropped_joints=dropped, source_frames=n_source, warnings=warnings)

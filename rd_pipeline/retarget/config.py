@@ -234,8 +234,9 @@ class RetargetConfig:
 
     fps: float = 50.0
     """Frame rate of the reference motion."""
-    contact: ContactThresholds = ContactThresholds()
-    """When a human foot counts as planted."""
+    contact: ContactThresholds = ContactThresholds(ground_percentile=2.0)
+    """When a human foot counts as planted; each ankle and toe's planted height is its own
+    `ground_percentile` height over the clip."""
     shape: TargetShaping = TargetShaping()
     """How the human motion becomes robot targets."""
     body_contact: BodyContactConfig = BodyContactConfig()

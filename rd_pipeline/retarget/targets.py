@@ -349,10 +349,11 @@ def _human_contacts(pos: np.ndarray, index: dict[str, int], fps: float, threshol
     """Foot contact from the lower of ankle and toe, each relative to its own planted height."""
     heights = []
     points = []
+    planted = thresholds.ground_percentile
     for foot, toe in zip(FEET, TOES):
         ankle_z = pos[:, index[foot], 2]
         toe_z = pos[:, index[toe], 2]
-        heights.append(np.minimum(ankle_z - np.percentile(ankle_z, 2), toe_z - np.percentile(toe_z, 2)))
+        heights.append(np.minimum(ankle_z - np.percentile(ankle_z, planted), toe_z - np.percentile(toe_z, planted)))
         points.append(0.5 * (pos[:, index[foot]] + pos[:, index[toe]]))
     foot_points = np.stack(points, axis=1)
     foot_points[..., 2] = np.stack(heights, axis=1)
