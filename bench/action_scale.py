@@ -2,13 +2,15 @@
 
     python bench/action_scale.py --robot h1_2 --motion dance2_subject4 --clip 107:117 --iterations 16000
         [--checkpoint 11400] [--set ...] [--scales 1 0.5 0.25 0] [--starts 10] [--out bench/results/action_scale_h1_2]
-        [--commit SHA]
+        [--joints '*_shoulder_*' '*_elbow_joint'] [--commit SHA]
 
 Loads a checkpoint of the finished `train` artifact of that plan (its last one by default) and
 rolls out its mean outputs, multiplied by each scale, from `--starts` evenly spaced frames on the
 nominal training model (primitive collision, training terminations, no randomization). Scale 0 is
 zero output: under `selective` the residual joints track the reference and the rest hold the
 default pose. Where a smaller scale survives longer, the policy's own outputs end the rollout.
+`--joints` scales only the outputs of the policy joints matching those globs (the rest stay whole),
+to tell which limbs' outputs do the harm.
 Writes `<out>.json` and `<out>.md`.
 """
 
@@ -18,6 +20,7 @@ import argparse
 import dataclasses
 import json
 import sys
+from fnmatch import fnmatch
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +61,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--set", nargs="*", default=[], help="further overrides, as the run had them")
     parser.add_argument("--scales", type=float, nargs="+", default=[1.0, 0.5, 0.25, 0.0])
     parser.add_argument("--starts", type=int, default=10)
+    parser.add_argument("--joints", nargs="+", default=["*"], help="globs of the policy joints to scale")
     parser.add_argument(
         "--commit", default=None, help="the commit of the installed code that runs this (default: HEAD)"
     )
@@ -74,6 +78,7 @@ def _measure(args: argparse.Namespace) -> dict[str, Any]:
     if iteration not in held:
         raise ValueError(f"{train} holds no checkpoint {iteration}")
     runner = _runner(plan, args.starts)
+    scaled = _scaled_joints(runner.job.robot.config.policy_joints, args.joints)
     load_checkpoint(held[iteration], runner.ppo, runner.env)
     env = runner.scoring_env
     assert env is not None
@@ -82,7 +87,7 @@ def _measure(args: argparse.Namespace) -> dict[str, Any]:
     survival_s = {}
     for scale in args.scales:
         env.load_state_dict(fresh)
-        seconds = _survival(runner, starts, scale)
+        seconds = _survival(runner, starts, scale, scaled)
         survival_s[str(scale)] = [round(float(value), 2) for value in seconds]
     return {
         "robot": args.robot,
@@ -91,6 +96,7 @@ def _measure(args: argparse.Namespace) -> dict[str, Any]:
         "train_key": train.name,
         "checkpoint": iteration,
         "commit": args.commit or head_commit(),
+        "scaled_joints": [joint for joint, chosen in zip(runner.job.robot.config.policy_joints, scaled) if chosen],
         "start_s": [round(float(frame) / env.control_hz, 2) for frame in starts],
         "survival_s": survival_s,
     }
@@ -114,9 +120,22 @@ def _runner(plan: workspace.Plan, starts: int) -> TrainingRunner:
     return TrainingRunner(job)
 
 
-def _survival(runner: TrainingRunner, starts: torch.Tensor, scale: float) -> torch.Tensor:
-    """Seconds survived from each start with the policy's mean outputs times `scale`."""
-    policy = lambda obs: runner.ppo.actor(obs, stochastic_output=False) * scale
+def _scaled_joints(policy_joints: tuple[str, ...], globs: list[str]) -> torch.Tensor:
+    """(P,) bool: the policy joints whose outputs are scaled."""
+    chosen = torch.tensor([any(fnmatch(joint, glob) for glob in globs) for joint in policy_joints])
+    if not chosen.any():
+        raise ValueError(f"--joints {' '.join(globs)} matches no policy joint ({', '.join(policy_joints)})")
+    return chosen
+
+
+def _survival(runner: TrainingRunner, starts: torch.Tensor, scale: float, scaled: torch.Tensor) -> torch.Tensor:
+    """Seconds survived from each start with the policy's mean outputs on `scaled` joints times `scale`."""
+    factor = torch.where(scaled, scale, 1.0)
+
+    def policy(obs):
+        outputs = runner.ppo.actor(obs, stochastic_output=False)
+        return outputs * factor.to(outputs)
+
     env = runner.scoring_env
     assert env is not None
     return survival(env, policy, starts)
@@ -127,6 +146,8 @@ def _table(result: dict[str, Any]) -> str:
     lines = [
         f"# {result['robot']} {result['motion']} {result['clip']} s, checkpoint {result['checkpoint']} "
         f"(train {result['train_key']}): seconds survived per start on the nominal training model",
+        "",
+        f"Scaled outputs: {', '.join(result['scaled_joints'])}.",
         "",
         "| start (s) | " + " | ".join(f"outputs x {scale}" for scale in scales) + " |",
         "|---|" + "---|" * len(scales),

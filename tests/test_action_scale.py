@@ -26,12 +26,15 @@ def _scale(out: Path, *extra: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, script, *args], capture_output=True, text=True, cwd=PROJECT)
 
 
-def _survival(out: Path, checkpoint: int) -> dict[str, list[float]]:
-    measured = _scale(out, "--checkpoint", str(checkpoint), "--scales", "1", "0", "--starts", "4")
+def _survival(out: Path, checkpoint: int, *joints: str) -> dict[str, list[float]]:
+    extra = ("--joints", *joints) if joints else ()
+    measured = _scale(out, "--checkpoint", str(checkpoint), "--scales", "1", "0", "--starts", "4", *extra)
     assert measured.returncode == 0, measured.stderr
     result = json.loads(out.with_suffix(".json").read_text())
     assert result["checkpoint"] == checkpoint
     assert result["start_s"] == [0.0, 0.5, 1.0, 1.5]
+    if joints:
+        assert result["scaled_joints"] == [f"{side}_elbow_joint" for side in ("left", "right")]
     return result["survival_s"]
 
 
@@ -52,6 +55,15 @@ def test_scaled_outputs_reproduce_the_logged_score_and_see_a_harmful_policy(arti
     harmful = _survival(tmp_path / "harmful", 2)
     assert harmful["0.0"] == trained["0.0"]  # zero outputs, whatever the weights
     assert all(bad < zero for bad, zero in zip(harmful["1.0"], harmful["0.0"]))
+    # Zeroing the elbows alone leaves the other joints pushed off: the rollouts still end early.
+    elbows_zeroed = _survival(tmp_path / "elbows", 2, "*_elbow_joint")
+    assert elbows_zeroed["1.0"] == harmful["1.0"]
+    assert all(bad < zero for bad, zero in zip(elbows_zeroed["0.0"], harmful["0.0"]))
+    none = _scale(tmp_path / "none", "--joints", "*_tail_joint")
+    assert none.returncode == 1
+    assert none.stderr.strip().startswith(
+        "error: --joints *_tail_joint matches no policy joint (left_hip_pitch_joint, "
+    )
     missing = _scale(tmp_path / "missing", "--checkpoint", "3")
     assert missing.returncode == 1
     assert missing.stderr.strip() == f"error: {train} holds no checkpoint 3"
