@@ -10,7 +10,9 @@ mask with height-only motion-far terminations (`motion_far_height_only`, the anc
 ones). For each window this rolls out zero outputs under each mode from `--starts` evenly spaced
 frames on the nominal training model (primitive collision, training terminations, no
 randomization) and writes the seconds survived per start, with the reference's joint speed (p95
-per second). Writes `<out>.json` and `<out>.md`.
+per second) and footing per second (the share of frames with a foot planted, and the median tilt
+of the lowest foot: a flat-soled robot cannot stand on a sole's edge). Writes `<out>.json` and
+`<out>.md`.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import torch
 from rd_pipeline.api import workspace
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.activity import joint_speed_p95_per_second
+from rd_pipeline.motion.footing import footing_per_second
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.env_config import EnvConfig
@@ -74,6 +77,7 @@ def _window(window: str, modes: list[str], starts: int) -> dict[str, Any]:
     reference = _reference(robot_name, motion, clip)
     robot = load_robot(robot_name)
     survival_s = {mode: _zero_output_survival(robot, reference, mode, starts) for mode in modes}
+    footing = footing_per_second(reference, robot.config.foot_bodies)
     return {
         "robot": robot_name,
         "motion": motion,
@@ -81,6 +85,8 @@ def _window(window: str, modes: list[str], starts: int) -> dict[str, Any]:
         "survival_s": survival_s,
         "median_s": {mode: statistics.median(values) for mode, values in survival_s.items()},
         "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(reference),
+        "reference_planted_share_by_second": [second.planted_share for second in footing],
+        "reference_lowest_foot_tilt_deg_by_second": [second.lowest_foot_tilt_deg for second in footing],
     }
 
 
@@ -120,17 +126,19 @@ def _table(result: dict[str, Any]) -> str:
     lines = [
         "# Zero outputs on the nominal training model: seconds survived per start",
         "",
-        "| robot | motion | clip | joint speed p95 (rad/s, per second) | "
-        + " | ".join(f"{mode} (median; per start)" for mode in modes)
-        + " |",
-        "|---|---|---|---|" + "---|" * len(modes),
+        "| robot | motion | clip | joint speed p95 (rad/s, per second) | planted share (per second) "
+        "| lowest-foot tilt (deg, per second) | " + " | ".join(f"{mode} (median; per start)" for mode in modes) + " |",
+        "|---|---|---|---|---|---|" + "---|" * len(modes),
     ]
     for row in result["windows"]:
         speeds = ", ".join(f"{value:.1f}" for value in row["reference_joint_speed_p95_by_second"])
+        planted = ", ".join(f"{value:.2f}" for value in row["reference_planted_share_by_second"])
+        tilts = ", ".join(f"{value:.0f}" for value in row["reference_lowest_foot_tilt_deg_by_second"])
         cells = [
             f"{row['median_s'][mode]:.2f}; {', '.join(f'{v:.2f}' for v in row['survival_s'][mode])}" for mode in modes
         ]
-        lines.append(f"| {row['robot']} | {row['motion']} | {row['clip']} | {speeds} | " + " | ".join(cells) + " |")
+        head = f"| {row['robot']} | {row['motion']} | {row['clip']} | {speeds} | {planted} | {tilts} | "
+        lines.append(head + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
