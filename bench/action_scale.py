@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 from fnmatch import fnmatch
 from pathlib import Path
@@ -27,6 +26,7 @@ from typing import Any
 import numpy as np
 import torch
 from provenance import head_commit
+from result_files import write_result
 
 from rd_pipeline.api import workspace
 from rd_pipeline.errors import PipelineError
@@ -44,10 +44,7 @@ def main() -> None:
         result = _measure(args)
     except (PipelineError, ValueError, OSError) as exc:
         sys.exit(f"error: {exc}")
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
-    args.out.with_suffix(".md").write_text(_table(result))
-    print(_table(result))
+    write_result(args.out, result, _table(result))
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -15,11 +15,12 @@ reference asks: a flat-soled robot asked to stand on a tilted sole stands on its
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 from pathlib import Path
 from typing import Any
+
+from result_files import write_result
 
 from rd_pipeline.api import workspace
 from rd_pipeline.errors import PipelineError
@@ -43,10 +44,7 @@ def main() -> None:
     except (PipelineError, ValueError) as exc:
         sys.exit(f"error: {exc}")
     result = {"tilt_deg": args.tilt_deg, "sparse_support": SPARSE_SUPPORT, "rows": rows}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
-    args.out.with_suffix(".md").write_text(_table(result))
-    print(_table(result))
+    write_result(args.out, result, _table(result))
 
 
 def _parser() -> argparse.ArgumentParser:

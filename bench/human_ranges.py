@@ -15,10 +15,10 @@ bound. Writes `<out>.json` and a markdown table `<out>.md`.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
+from result_files import write_result
 
 from rd_pipeline import paths
 from rd_pipeline.motion.bvh import read_bvh
@@ -80,11 +80,8 @@ def main() -> None:
     rows = [measure(motion) for motion in args.motions]
     largest = max(row[side]["extension_max_deg"] for row in rows for side in ("left", "right"))
     summary = {"hip_extension_max_deg": largest, "takes": rows}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".json").write_text(json.dumps(summary, indent=2) + "\n")
     header = f"Hip extension and flexion of the performers, degrees; largest extension {largest}.\n\n"
-    args.out.with_suffix(".md").write_text(header + _table(rows))
-    print(header + _table(rows))
+    write_result(args.out, summary, header + _table(rows))
 
 
 if __name__ == "__main__":

@@ -19,13 +19,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import statistics
 import sys
 from pathlib import Path
 from typing import Any
 
 import torch
+from result_files import write_result
 
 from rd_pipeline.api import workspace
 from rd_pipeline.errors import PipelineError
@@ -51,10 +51,7 @@ def main() -> None:
     except (PipelineError, ValueError) as exc:
         sys.exit(f"error: {exc}")
     result = {"starts": args.starts, "modes": args.modes, "windows": rows}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
-    args.out.with_suffix(".md").write_text(_table(result))
-    print(_table(result))
+    write_result(args.out, result, _table(result))
 
 
 def _parser() -> argparse.ArgumentParser:

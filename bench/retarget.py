@@ -30,6 +30,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
+from result_files import write_result
 
 from rd_pipeline import paths
 from rd_pipeline.motion.bvh import read_bvh
@@ -107,9 +108,7 @@ def main() -> None:
             label = f"{row['robot']:<5} {row['motion']:<26} {row['seconds']:7.1f} s"
             print(f"{label}  {_verdict(row['ours'])}", flush=True)
     rows = in_take_order(rows, args.motions, args.robots)
-    args.out.with_suffix(".json").write_text(json.dumps(rows, indent=2) + "\n")
-    args.out.with_suffix(".md").write_text(_table(rows))
-    print(_table(rows))
+    write_result(args.out, rows, _table(rows))
 
 
 def resume_log(log: Path, resume: bool) -> list[dict]:

@@ -14,13 +14,13 @@ and `<out>.md`.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 import subprocess
 import sys
 from pathlib import Path
 
+from result_files import write_result
 from retarget import shared_takes
 
 ONE_TAKE = """
@@ -52,10 +52,7 @@ def main() -> None:
             print(f"round {round_index + 1} {motion}: " + " / ".join(f"{v[-1]:.1f}" for v in fps[motion]), flush=True)
     rows = [_row(motion, per_tree) for motion, per_tree in fps.items()]
     result = {"robot": args.robot, "trees": [str(tree) for tree in trees], "rounds": args.rounds, "takes": rows}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.with_suffix(".json").write_text(json.dumps(result, indent=2) + "\n")
-    args.out.with_suffix(".md").write_text(_table(result))
-    print(_table(result))
+    write_result(args.out, result, _table(result))
 
 
 def _frames_per_s(tree: Path, robot: str, motion: str, core: int) -> float:
