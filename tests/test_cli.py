@@ -222,10 +222,14 @@ def test_window_trains_on_the_stretch_the_reference_speed_chooses(artifacts: Pat
     take = ("--robot", "h1_2", "--motion", "dance2_subject4")
     made = cli("run", *take, "--window", "10", "--until", "import")
     assert made.returncode == 0, made.stderr
-    assert "window: 107:117 s at speed quantile 0.5 (joint speed p95 5.248 rad/s)" in made.stderr
+    window = "window: 107:117 s at speed quantile 0.5 (joint speed p95 5.248 rad/s; "
+    footing = "lowest-foot tilt 3-12 deg by the second, a foot planted in 48% of frames)"
+    assert window + footing in made.stderr
     busiest = cli("plan", *take, "--window", "10", "--window-speed", "1", "--json")
     assert busiest.returncode == 0, busiest.stderr
-    assert "window: 193:203 s at speed quantile 1 (joint speed p95 7.731 rad/s)" in busiest.stderr
+    window = "window: 193:203 s at speed quantile 1 (joint speed p95 7.731 rad/s; "
+    footing = "lowest-foot tilt 13-25 deg by the second, a foot planted in 14% of frames)"
+    assert window + footing in busiest.stderr
     clipped = cli("plan", *take, "--clip", "193:203", "--json")
     whole = cli("plan", *take, "--json")
     by_window = {row["stage"]: row["key"] for row in json.loads(busiest.stdout)}

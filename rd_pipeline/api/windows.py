@@ -20,6 +20,7 @@ from rd_pipeline.errors import PipelineError
 
 if TYPE_CHECKING:
     from rd_pipeline.motion.activity import Window
+    from rd_pipeline.motion.footing import Footing
 
 
 def check_window(plan: workspace.Plan, seconds: int, quantile: float) -> None:
@@ -49,3 +50,14 @@ def speed_window(plan: workspace.Plan, seconds: int, quantile: float) -> Window:
         return window_at_speed_quantile(workspace.reference(plan), seconds, quantile)
     except ValueError as exc:
         raise PipelineError(f"window of {plan.robot}/{plan.motion}: {exc}") from None
+
+
+def window_footing(plan: workspace.Plan, window: Window) -> list[Footing]:
+    """How the reference's feet stand in each second of `window` (a flat-soled robot asked to
+    stand on a tilted sole stands on its edge)."""
+    from rd_pipeline.motion.footing import footing_per_second
+    from rd_pipeline.robots.config import load_robot_config
+
+    assert plan.robot is not None  # a window is chosen from a robot's reference
+    feet = load_robot_config(plan.robot).foot_bodies
+    return footing_per_second(workspace.reference(plan), feet)[window.start_s : window.end_s]

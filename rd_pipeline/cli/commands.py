@@ -7,7 +7,7 @@ import json
 import shlex
 import subprocess
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rich.console import Console
 from rich.markup import escape
@@ -36,6 +36,9 @@ from rd_pipeline.cli.args import (
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.profiles import profile_note
 from rd_pipeline.robots.config import available_robots, load_robot_config
+
+if TYPE_CHECKING:
+    from rd_pipeline.motion.footing import Footing
 
 
 def _assignments(cmd: StageParams) -> tuple[str, ...]:
@@ -77,9 +80,19 @@ def _take_plan(
         _make_reference(planned, selection, console)
     window = windows.speed_window(planned, cmd.window, quantile)
     speed = f"joint speed p95 {window.joint_speed_p95:g} rad/s"
-    console.print(escape(f"window: {window.clip} s at speed quantile {quantile:g} ({speed})"), highlight=False)
+    footing = _footing(windows.window_footing(planned, window))
+    console.print(
+        escape(f"window: {window.clip} s at speed quantile {quantile:g} ({speed}; {footing})"), highlight=False
+    )
     clipped = (*assignments, f"train.clip={window.clip}")
     return workspace.plan(robot, motion, cmd.profile, cmd.params_file, clipped, cmd.seed, cmd.source)
+
+
+def _footing(seconds: list[Footing]) -> str:
+    """Where the window's feet stand: the range of its per-second lowest-foot tilt, and its planted share."""
+    tilts = [second.lowest_foot_tilt_deg for second in seconds]
+    planted = sum(second.planted_share for second in seconds) / len(seconds)
+    return f"lowest-foot tilt {min(tilts):.0f}-{max(tilts):.0f} deg by the second, a foot planted in {planted:.0%} of frames"
 
 
 def _make_reference(planned: workspace.Plan, selection: Selection, console: Console) -> None:
