@@ -56,7 +56,12 @@ def main() -> None:
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--windows", nargs="+", default=list(WINDOWS), help="robot:motion:start:end (seconds)")
+    parser.add_argument(
+        "--windows",
+        nargs="+",
+        default=list(WINDOWS),
+        help="robot:motion:start:end (seconds), `:bvh` or `:csv` appended to choose the reference's source",
+    )
     parser.add_argument(
         "--modes",
         nargs="+",
@@ -69,9 +74,9 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _window(window: str, modes: list[str], starts: int) -> dict[str, Any]:
-    robot_name, motion, start_s, end_s = _split(window)
+    robot_name, motion, start_s, end_s, source = _split(window)
     clip = f"{start_s}:{end_s}"
-    reference = _reference(robot_name, motion, clip)
+    reference, resolved = _reference(robot_name, motion, clip, source)
     robot = load_robot(robot_name)
     survival_s = {mode: _zero_output_survival(robot, reference, mode, starts) for mode in modes}
     footing = footing_per_second(reference, robot.config.foot_bodies)
@@ -79,6 +84,7 @@ def _window(window: str, modes: list[str], starts: int) -> dict[str, Any]:
         "robot": robot_name,
         "motion": motion,
         "clip": clip,
+        "source": resolved,
         "survival_s": survival_s,
         "median_s": {mode: statistics.median(values) for mode, values in survival_s.items()},
         "reference_joint_speed_p95_by_second": joint_speed_p95_per_second(reference),
@@ -87,21 +93,22 @@ def _window(window: str, modes: list[str], starts: int) -> dict[str, Any]:
     }
 
 
-def _split(window: str) -> tuple[str, str, str, str]:
+def _split(window: str) -> tuple[str, str, str, str, str | None]:
     parts = window.split(":")
-    if len(parts) != 4:
-        raise ValueError(f"--windows {window!r}: expected robot:motion:start:end")
-    robot, motion, start, end = parts
-    return robot, motion, start, end
+    if len(parts) not in (4, 5) or parts[4:] not in ([], ["bvh"], ["csv"]):
+        raise ValueError(f"--windows {window!r}: expected robot:motion:start:end[:bvh|:csv]")
+    source = parts[4] if len(parts) == 5 else None
+    return parts[0], parts[1], parts[2], parts[3], source
 
 
-def _reference(robot: str, motion: str, clip: str) -> ReferenceMotion:
-    """The clip of the reference the pipeline trains on (made up to `prior` if not yet there)."""
-    plan = workspace.plan(robot, motion, "cpu")
+def _reference(robot: str, motion: str, clip: str, source: str | None) -> tuple[ReferenceMotion, str]:
+    """The clip of the reference the pipeline trains on (made up to `prior` if not yet there), and
+    its source (`bvh` or `csv`; by default BVH where the take has one)."""
+    plan = workspace.plan(robot, motion, "cpu", source=source)
     workspace.run(plan, until="prior", resume=True)
     reference = workspace.reference(plan)
     start, end = clip_frames(clip, reference.fps, reference.n_frames)
-    return reference.frames(start, end)
+    return reference.frames(start, end), plan.pipeline.source
 
 
 def _zero_output_survival(robot: Robot, reference: ReferenceMotion, variant: str, starts: int) -> list[float]:
@@ -123,7 +130,7 @@ def _table(result: dict[str, Any]) -> str:
     lines = [
         "# Zero outputs on the nominal training model: seconds survived per start",
         "",
-        "| robot | motion | clip | joint speed p95 (rad/s, per second) | planted share (per second) "
+        "| robot | motion | clip (source) | joint speed p95 (rad/s, per second) | planted share (per second) "
         "| lowest-foot tilt (deg, per second) | " + " | ".join(f"{mode} (median; per start)" for mode in modes) + " |",
         "|---|---|---|---|---|---|" + "---|" * len(modes),
     ]
@@ -134,7 +141,8 @@ def _table(result: dict[str, Any]) -> str:
         cells = [
             f"{row['median_s'][mode]:.2f}; {', '.join(f'{v:.2f}' for v in row['survival_s'][mode])}" for mode in modes
         ]
-        head = f"| {row['robot']} | {row['motion']} | {row['clip']} | {speeds} | {planted} | {tilts} | "
+        clip = f"{row['clip']} ({row['source']})"
+        head = f"| {row['robot']} | {row['motion']} | {clip} | {speeds} | {planted} | {tilts} | "
         lines.append(head + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
