@@ -92,7 +92,8 @@ def _footing(seconds: list[Footing]) -> str:
     """Where the window's feet stand: the range of its per-second lowest-foot tilt, and its planted share."""
     tilts = [second.lowest_foot_tilt_deg for second in seconds]
     planted = sum(second.planted_share for second in seconds) / len(seconds)
-    return f"lowest-foot tilt {min(tilts):.0f}-{max(tilts):.0f} deg by the second, a foot planted in {planted:.0%} of frames"
+    tilt = f"lowest-foot tilt {min(tilts):.0f}-{max(tilts):.0f} deg by the second"
+    return f"{tilt}, a foot planted in {planted:.0%} of frames"
 
 
 def _make_reference(planned: workspace.Plan, selection: Selection, console: Console) -> None:
