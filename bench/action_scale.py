@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
-from fnmatch import fnmatch
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +29,7 @@ from result_files import write_result
 
 from rd_pipeline.api import workspace
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.rl.actions import joints_matching
 from rd_pipeline.rl.evaluate import scoring_starts, survival
 from rd_pipeline.rl.runner import Segments, TrainingJob, TrainingRunner, clip_segments
 from rd_pipeline.rl.trainer import load_checkpoint
@@ -119,7 +119,7 @@ def _runner(plan: workspace.Plan, starts: int) -> TrainingRunner:
 
 def _scaled_joints(policy_joints: tuple[str, ...], globs: list[str]) -> torch.Tensor:
     """(P,) bool: the policy joints whose outputs are scaled."""
-    chosen = torch.tensor([any(fnmatch(joint, glob) for glob in globs) for joint in policy_joints])
+    chosen = torch.from_numpy(joints_matching(policy_joints, tuple(globs)))
     if not chosen.any():
         raise ValueError(f"--joints {' '.join(globs)} matches no policy joint ({', '.join(policy_joints)})")
     return chosen

@@ -34,10 +34,8 @@ class Window:
 def joint_speed_p95_per_second(reference: ReferenceMotion) -> list[float]:
     """The 95th percentile of |joint velocity| (rad/s) in each second of `reference`, the last,
     partial one included."""
-    window = round(reference.fps)
     speeds = np.abs(reference.joint_vel)
-    starts = range(0, reference.n_frames, window)
-    return [round(float(np.percentile(speeds[s : s + window], 95)), 2) for s in starts]
+    return [round(float(np.percentile(speeds[second], 95)), 2) for second in reference.seconds()]
 
 
 def speed_windows(reference: ReferenceMotion, seconds: int) -> list[Window]:

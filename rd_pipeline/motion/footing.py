@@ -36,14 +36,13 @@ def footing_per_second(reference: ReferenceMotion, feet: tuple[str, ...]) -> lis
         raise ValueError(f"reference has no foot body '{missing[0]}'")
     tilt = _lowest_foot_tilt_deg(reference, [reference.body_names.index(foot) for foot in feet])
     planted = np.asarray(reference.foot_contact.any(axis=1))
-    window = round(reference.fps)
     return [
         Footing(
-            start_s=start // window,
-            planted_share=round(float(planted[start : start + window].mean()), 3),
-            lowest_foot_tilt_deg=round(float(np.median(tilt[start : start + window])), 1),
+            start_s=index,
+            planted_share=round(float(planted[second].mean()), 3),
+            lowest_foot_tilt_deg=round(float(np.median(tilt[second])), 1),
         )
-        for start in range(0, reference.n_frames, window)
+        for index, second in enumerate(reference.seconds())
     ]
 
 
@@ -52,5 +51,5 @@ def _lowest_foot_tilt_deg(reference: ReferenceMotion, feet: list[int]) -> np.nda
     frames = np.arange(reference.n_frames)
     lowest = np.asarray(feet)[reference.body_pos_w[:, feet, 2].argmin(axis=1)]
     quat_wxyz = reference.body_quat_w[frames, lowest]
-    up = Rotation.from_quat(quat_wxyz[:, [1, 2, 3, 0]]).apply([0.0, 0.0, 1.0])
-    return np.degrees(np.arccos(np.clip(up[:, 2], -1.0, 1.0)))
+    up_z = Rotation.from_quat(quat_wxyz[:, [1, 2, 3, 0]]).as_matrix()[:, 2, 2]
+    return np.degrees(np.arccos(np.clip(up_z, -1.0, 1.0)))

@@ -55,6 +55,11 @@ class ReferenceMotion:
     def duration_s(self) -> float:
         return self.n_frames / self.fps
 
+    def seconds(self) -> list[slice]:
+        """Frame slices of each second of this motion, the last, partial one included."""
+        window = round(self.fps)
+        return [slice(start, start + window) for start in range(0, self.n_frames, window)]
+
     def frames(self, start: int, end: int) -> ReferenceMotion:
         """Frames [start, end) of this motion (a training clip)."""
         per_frame = {

@@ -71,8 +71,12 @@ def residual_mask(config: RobotConfig, preset: str) -> np.ndarray:
         mask = np.zeros(len(config.policy_joints), dtype=bool)
         mask[list(config.residual_indices)] = True
         return mask
-    patterns = _PRESET_PATTERNS[preset]
-    return np.array([any(fnmatch(joint, p) for p in patterns) for joint in config.policy_joints])
+    return joints_matching(config.policy_joints, _PRESET_PATTERNS[preset])
+
+
+def joints_matching(joints: tuple[str, ...], patterns: tuple[str, ...]) -> np.ndarray:
+    """(J,) bool: which of `joints` match any of the glob `patterns`."""
+    return np.array([any(fnmatch(joint, pattern) for pattern in patterns) for joint in joints], dtype=bool)
 
 
 def joint_semantics(config: RobotConfig, preset: str) -> tuple[str, ...]:
