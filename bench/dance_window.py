@@ -1,7 +1,7 @@
 """Benchmark: a window of dance learned and validated, grown over as many sittings as it takes.
 
     python bench/dance_window.py [--robot g1] [--motion dance1_subject2] [--clip 11:21 | --busiest 10 [--speed-quantile 1]]
-        [--profile cpu] [--iterations 3300] [--set stage.param=value ...]
+        [--source bvh|csv] [--profile cpu] [--iterations 3300] [--set stage.param=value ...]
         [--out bench/results/dance_window.json] [--commit SHA]
     python bench/dance_window.py --profile paper --until train --fill-minutes 6   # a GPU lease
 
@@ -100,6 +100,12 @@ def _parser() -> argparse.ArgumentParser:
         default=1.0,
         help="which window when --clip is not given: nearest this quantile of the windows' joint speed (1: busiest)",
     )
+    parser.add_argument(
+        "--source",
+        choices=("bvh", "csv"),
+        default=None,
+        help="the motion's source: bvh (parse + retarget) or csv (the dataset's retargeting); default: bvh where present",
+    )
     parser.add_argument("--profile", default="cpu")
     parser.add_argument("--iterations", type=int, default=3300)
     parser.add_argument("--seed", type=int, default=0)
@@ -125,13 +131,13 @@ def _quantile(text: str) -> float:
 
 def _plan(args: argparse.Namespace, clip: str, iterations: int) -> workspace.Plan:
     sets = (f"train.clip={clip}", f"train.iterations={iterations}", *args.set)
-    return workspace.plan(args.robot, args.motion, args.profile, overrides=sets, seed=args.seed)
+    return workspace.plan(args.robot, args.motion, args.profile, overrides=sets, seed=args.seed, source=args.source)
 
 
 def _window_clip(args: argparse.Namespace) -> str:
     """The `--busiest`-second window of the whole take's reference at `--speed-quantile` of its
     windows' joint speed (what `rd-pipeline run --window N --window-speed Q` chooses)."""
-    whole = workspace.plan(args.robot, args.motion, args.profile, seed=args.seed)
+    whole = workspace.plan(args.robot, args.motion, args.profile, seed=args.seed, source=args.source)
     windows.check_window(whole, args.busiest, args.speed_quantile)
     workspace.run(whole, until=workspace.providing(whole, "reference"))
     window = windows.speed_window(whole, args.busiest, args.speed_quantile)
@@ -170,6 +176,7 @@ def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
         "robot": plan.robot,
         "motion": plan.motion,
         "clip": clip,
+        "source": plan.pipeline.source,
         "samples": samples,
         **training_hours(train),
         "samples_per_s_median": manifest["metrics"]["samples_per_s_median"],
