@@ -40,6 +40,6 @@ def test_a_source_the_take_lacks_is_one_line_and_no_result(artifacts: Path, tmp_
     refused = subprocess.run([sys.executable, SCRIPT, *args], capture_output=True, text=True, cwd=PROJECT)
     assert refused.returncode == 1
     bvh = LAFAN_DIR / "dance2_subject4.bvh"
-    missing = f"[Errno 2] No such file or directory: '{bvh}'"
-    assert refused.stderr.strip().splitlines() == [f"error: {bvh}: cannot read the BVH header ({missing})"]
+    has = "'dance2_subject4' has: csv:g1, csv:h1, csv:h1_2"
+    assert refused.stderr.strip().splitlines() == [f"error: --source bvh: {bvh} not found; {has}"]
     assert not out.exists()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -13,6 +14,7 @@ from pathlib import Path
 import pytest
 from conftest import PROJECT, cli
 
+from rd_pipeline import paths
 from rd_pipeline.artifacts.keys import artifact_key
 from rd_pipeline.artifacts.runner import Pipeline, execute, resolve_source
 from rd_pipeline.artifacts.store import ArtifactStore
@@ -46,6 +48,14 @@ def test_source_choice(monkeypatch: pytest.MonkeyPatch) -> None:
     ]
     with pytest.raises(PipelineError, match=r"no data for motion 'dance9_subject1'"):
         resolve_source("g1", "dance9_subject1", None)
+    # A forced source the take lacks names the missing file and the sources it does have.
+    bvh = paths.bvh_path("dance2_subject4")
+    lacks = f"--source bvh: {bvh} not found; 'dance2_subject4' has: csv:g1, csv:h1, csv:h1_2"
+    with pytest.raises(PipelineError, match=f"^{re.escape(lacks)}$"):
+        resolve_source("h1_2", "dance2_subject4", "bvh")
+    csv = paths.csv_path("g1", "fallAndGetUp1_subject1")
+    with pytest.raises(PipelineError, match=f"^{re.escape(f'--source csv: {csv} not found')}; .* has: bvh$"):
+        resolve_source("g1", "fallAndGetUp1_subject1", "csv")
 
 
 def test_cache_hit_does_no_work_and_force_redoes_it(artifacts: Path) -> None:
