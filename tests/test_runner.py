@@ -16,7 +16,8 @@ from conftest import PROJECT, cli
 
 from rd_pipeline import paths
 from rd_pipeline.artifacts.keys import artifact_key
-from rd_pipeline.artifacts.runner import Pipeline, execute, resolve_source
+from rd_pipeline.artifacts.runner import Pipeline, execute
+from rd_pipeline.artifacts.sources import resolve_source
 from rd_pipeline.artifacts.store import ArtifactStore
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.stages import REGISTRY, stage_names

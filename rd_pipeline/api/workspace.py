@@ -23,7 +23,8 @@ from typing import TYPE_CHECKING, Any
 from rich.console import Console
 
 from rd_pipeline import paths
-from rd_pipeline.artifacts.runner import Pipeline, PlannedStage, StageOutcome, execute, resolve_source, stage_status
+from rd_pipeline.artifacts.runner import Pipeline, PlannedStage, StageOutcome, execute, stage_status
+from rd_pipeline.artifacts.sources import resolve_source
 from rd_pipeline.artifacts.stage import Stage
 from rd_pipeline.artifacts.store import MANIFEST, ArtifactStore
 from rd_pipeline.errors import PipelineError

@@ -22,8 +22,6 @@ from rd_pipeline.errors import Interrupted, PipelineError
 from rd_pipeline.files import file_sha256
 from rd_pipeline.lazy import load_deferred
 
-SOURCES = ("bvh", "csv")
-
 
 @dataclass(frozen=True)
 class PlannedStage:
@@ -142,37 +140,6 @@ class Pipeline:
             planned.append(entry)
             by_role[stage.provides] = entry
         return planned
-
-
-def resolve_source(robot: str | None, motion: str, forced: str | None) -> str:
-    """`bvh` when the raw BVH exists, else `csv` when the robot's retargeted CSV exists."""
-    if forced is not None:
-        if forced not in SOURCES:
-            raise PipelineError(f"--source must be one of {', '.join(SOURCES)}, got '{forced}'")
-        _require_forced_source(robot, motion, forced)
-        return forced
-    if paths.bvh_path(motion).is_file():
-        return "bvh"
-    csv = paths.csv_path(robot, motion) if robot else None
-    if csv is not None and csv.is_file():
-        return "csv"
-    where = f"{paths.bvh_path(motion)}" + (f" nor {csv}" if csv else " (and no dataset CSV folder is set)")
-    raise PipelineError(
-        f"no data for motion '{motion}': neither {where} exists; `rd-pipeline fetch-lafan` downloads "
-        "LAFAN1's BVH files, or point RD_LAFAN_DIR (BVH files), RD_RETARGETED_DIR (dataset CSVs) and "
-        f"RD_ROBOT_ASSETS (robot models) at the data, as variables or in {paths.SETTINGS_FILE}"
-    )
-
-
-def _require_forced_source(robot: str | None, motion: str, forced: str) -> None:
-    """A forced source whose file is missing is named in one line, with the sources the motion has."""
-    wanted = paths.bvh_path(motion) if forced == "bvh" else (paths.csv_path(robot, motion) if robot else None)
-    if wanted is not None and wanted.is_file():
-        return
-    present = paths.available_motions().get(motion, [])
-    has = f"'{motion}' has: {', '.join(present)}" if present else f"'{motion}' has no source here"
-    missing = f"{wanted} not found" if wanted is not None else "no dataset CSV folder or robot is set"
-    raise PipelineError(f"--source {forced}: {missing}; {has}")
 
 
 def execute(

@@ -1,0 +1,40 @@
+"""Which source a motion is read from: LAFAN1's raw BVH (retargeted here) or a dataset CSV (already
+retargeted to the robot)."""
+
+from __future__ import annotations
+
+from rd_pipeline import paths
+from rd_pipeline.errors import PipelineError
+
+SOURCES = ("bvh", "csv")
+
+
+def resolve_source(robot: str | None, motion: str, forced: str | None) -> str:
+    """`bvh` when the raw BVH exists, else `csv` when the robot's retargeted CSV exists."""
+    if forced is not None:
+        if forced not in SOURCES:
+            raise PipelineError(f"--source must be one of {', '.join(SOURCES)}, got '{forced}'")
+        _require_forced_source(robot, motion, forced)
+        return forced
+    if paths.bvh_path(motion).is_file():
+        return "bvh"
+    csv = paths.csv_path(robot, motion) if robot else None
+    if csv is not None and csv.is_file():
+        return "csv"
+    where = f"{paths.bvh_path(motion)}" + (f" nor {csv}" if csv else " (and no dataset CSV folder is set)")
+    raise PipelineError(
+        f"no data for motion '{motion}': neither {where} exists; `rd-pipeline fetch-lafan` downloads "
+        "LAFAN1's BVH files, or point RD_LAFAN_DIR (BVH files), RD_RETARGETED_DIR (dataset CSVs) and "
+        f"RD_ROBOT_ASSETS (robot models) at the data, as variables or in {paths.SETTINGS_FILE}"
+    )
+
+
+def _require_forced_source(robot: str | None, motion: str, forced: str) -> None:
+    """A forced source whose file is missing is named in one line, with the sources the motion has."""
+    wanted = paths.bvh_path(motion) if forced == "bvh" else (paths.csv_path(robot, motion) if robot else None)
+    if wanted is not None and wanted.is_file():
+        return
+    present = paths.available_motions().get(motion, [])
+    has = f"'{motion}' has: {', '.join(present)}" if present else f"'{motion}' has no source here"
+    missing = f"{wanted} not found" if wanted is not None else "no dataset CSV folder or robot is set"
+    raise PipelineError(f"--source {forced}: {missing}; {has}")
