@@ -3,6 +3,8 @@ retargeted to the robot)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from rd_pipeline import paths
 from rd_pipeline.errors import PipelineError
 
@@ -16,11 +18,10 @@ def resolve_source(robot: str | None, motion: str, forced: str | None) -> str:
             raise PipelineError(f"--source must be one of {', '.join(SOURCES)}, got '{forced}'")
         _require_forced_source(robot, motion, forced)
         return forced
-    if paths.bvh_path(motion).is_file():
-        return "bvh"
-    csv = paths.csv_path(robot, motion) if robot else None
-    if csv is not None and csv.is_file():
-        return "csv"
+    for source in SOURCES:
+        if _exists(_source_file(robot, motion, source)):
+            return source
+    csv = _source_file(robot, motion, "csv")
     where = f"{paths.bvh_path(motion)}" + (f" nor {csv}" if csv else " (and no dataset CSV folder is set)")
     raise PipelineError(
         f"no data for motion '{motion}': neither {where} exists; `rd-pipeline fetch-lafan` downloads "
@@ -29,10 +30,21 @@ def resolve_source(robot: str | None, motion: str, forced: str | None) -> str:
     )
 
 
+def _source_file(robot: str | None, motion: str, source: str) -> Path | None:
+    """The file a source reads; None for a dataset CSV without a robot or a CSV folder."""
+    if source == "bvh":
+        return paths.bvh_path(motion)
+    return paths.csv_path(robot, motion) if robot else None
+
+
+def _exists(path: Path | None) -> bool:
+    return path is not None and path.is_file()
+
+
 def _require_forced_source(robot: str | None, motion: str, forced: str) -> None:
     """A forced source whose file is missing is named in one line, with the sources the motion has."""
-    wanted = paths.bvh_path(motion) if forced == "bvh" else (paths.csv_path(robot, motion) if robot else None)
-    if wanted is not None and wanted.is_file():
+    wanted = _source_file(robot, motion, forced)
+    if _exists(wanted):
         return
     present = paths.available_motions().get(motion, [])
     has = f"'{motion}' has: {', '.join(present)}" if present else f"'{motion}' has no source here"
