@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import platform
 import resource
 import statistics
 import tempfile
@@ -149,6 +150,16 @@ def _measure(
     return rates
 
 
+def _cpu_model() -> str:
+    """The processor's name, since the same two cores differ by 1.6x between hosts."""
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.is_file():
+        for line in cpuinfo.read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    return platform.processor() or platform.machine()
+
+
 def _result(
     args: argparse.Namespace,
     envs: dict[str, TrackingEnv],
@@ -161,6 +172,7 @@ def _result(
         "envs": args.envs,
         "threads": args.threads,
         "repeats": args.repeats,
+        "cpu": _cpu_model(),
         "paths": {},
     }
     for name in envs:
