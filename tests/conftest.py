@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -18,6 +19,10 @@ for variable, default in {
     "RD_ROBOT_ASSETS": SHARED / "robots",
 }.items():
     os.environ.setdefault(variable, str(default))
+
+# Two test workers share the machine's cores: torch on one thread in each (and in the runs they
+# start), or the idle threads of one worker's PPO update spin on the cores the other needs.
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 LAFAN_DIR = Path(os.environ["RD_LAFAN_DIR"])
 RETARGETED_DIR = Path(os.environ["RD_RETARGETED_DIR"])
@@ -43,6 +48,38 @@ def artifacts(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     root = tmp_path / "artifacts"
     monkeypatch.setenv("RD_ARTIFACTS", str(root))
     return root
+
+
+class ReferenceSeeds:
+    """The parse and retarget artifacts of a BVH take, made once per test worker and copied into a
+    test's store: tests of the stages after retargeting start where a user's second run does, and
+    the suite retargets each take it uses once per worker instead of once per test."""
+
+    def __init__(self, root: Path) -> None:
+        self.root = root
+
+    def into(self, store: Path, robot: str, motion: str) -> Path:
+        """Copy `robot`/`motion`'s reference artifacts (default retarget params) into `store`."""
+        seed = self.root / robot / motion
+        if not (seed / "retarget").is_dir():
+            made = cli(
+                "run", "--robot", robot, "--motion", motion, "--until", "retarget", env={"RD_ARTIFACTS": str(seed)}
+            )
+            assert made.returncode == 0, made.stderr
+        for stage in ("parse", "retarget"):
+            shutil.copytree(seed / stage, store / stage, dirs_exist_ok=True)
+        return store
+
+
+@pytest.fixture(scope="session")
+def reference_seeds(tmp_path_factory: pytest.TempPathFactory) -> ReferenceSeeds:
+    return ReferenceSeeds(tmp_path_factory.mktemp("reference_seeds"))
+
+
+@pytest.fixture
+def g1_dance_store(artifacts: Path, reference_seeds: ReferenceSeeds) -> Path:
+    """The test's store, already holding G1 dance1_subject2's reference (the embedded default)."""
+    return reference_seeds.into(artifacts, "g1", "dance1_subject2")
 
 
 def cli(*args: str, env: dict[str, str] | None = None, cwd: Path | None = None) -> subprocess.CompletedProcess:

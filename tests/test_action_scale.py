@@ -39,6 +39,7 @@ def _survival(out: Path, checkpoint: int, *joints: str) -> dict[str, list[float]
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("g1_dance_store")
 def test_scaled_outputs_reproduce_the_logged_score_and_see_a_harmful_policy(artifacts: Path, tmp_path: Path) -> None:
     overrides = (f"train.clip={CLIP}", "train.iterations=2", *SETS)
     plan = workspace.plan("g1", "dance1_subject2", "smoke", overrides=overrides)

@@ -25,6 +25,7 @@ def _states(robot: str, motion: str, *extra: str) -> dict[str, dict]:
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("g1_dance_store")
 def test_two_runs_of_one_key_started_together_both_succeed(artifacts: Path) -> None:
     args = [
         sys.executable,

@@ -55,6 +55,7 @@ def _manifest(plan: workspace.Plan, stage: str) -> dict:
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("g1_dance_store")
 def test_a_restored_run_chooses_among_the_checkpoints_it_holds(artifacts: Path, tmp_path: Path) -> None:
     workspace.run(_plan(2), until="train")
     state = tmp_path / "state"
@@ -83,6 +84,7 @@ def test_a_restored_run_chooses_among_the_checkpoints_it_holds(artifacts: Path, 
 
 
 @pytest.mark.slow
+@pytest.mark.usefixtures("g1_dance_store")
 def test_a_fork_finishes_a_stage_of_a_longer_run_without_training(artifacts: Path, tmp_path: Path) -> None:
     longer = _plan(4)
     workspace.run(longer, until="train")

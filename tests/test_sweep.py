@@ -37,6 +37,7 @@ def test_ray_sweep_reports_a_failing_trial_and_finishes_the_others(artifacts: Pa
     assert len(seen) == 3
 
 
+@pytest.mark.usefixtures("g1_dance_store")
 @pytest.mark.slow
 def test_ablate_residual_writes_the_paper_table(artifacts: Path) -> None:
     result = cli(

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import PROJECT, cli, h1_2_dance_env
+from conftest import PROJECT, ReferenceSeeds, cli, h1_2_dance_env
 
 from rd_pipeline.api.workspace import continued_runs, training_seconds, training_seconds_per_run
 from rd_pipeline.artifacts.stage import build_params
@@ -26,6 +26,10 @@ from rd_pipeline.rl.runner import Segments, clip_segments
 from rd_pipeline.rl.trainer import load_checkpoint, train
 from rd_pipeline.rl.training_log import read_training_log
 from rd_pipeline.stages import REGISTRY
+
+INTERRUPTED_ITERATIONS = 12
+"""The interrupted run's length: interrupted at its third checkpoint, it has nine left to continue
+(each takes seconds with its scoring, so the interrupt never comes after the end)."""
 
 
 def _setup(seed: int = 3, config: EnvConfig = EnvConfig(num_envs=4, threads=2)):
@@ -146,7 +150,11 @@ def test_a_reward_weight_and_a_termination_threshold_set_on_the_command_line_cha
     ("robot", "motion"), [("g1", "dance1_subject2"), ("h1", "dance1_subject1"), ("h1_2", "dance2_subject4")]
 )
 @pytest.mark.slow
-def test_smoke_profile_runs_the_dag_to_export(robot: str, motion: str, artifacts: Path) -> None:
+def test_smoke_profile_runs_the_dag_to_export(
+    robot: str, motion: str, artifacts: Path, reference_seeds: ReferenceSeeds
+) -> None:
+    if robot != "h1_2":  # the BVH takes; H1-2's dance comes from the dataset CSV
+        reference_seeds.into(artifacts, robot, motion)
     args = ("run", "--robot", robot, "--motion", motion, "--until", "export", "--profile", "smoke")
     result = cli(*args)
     assert result.returncode == 0, result.stderr
@@ -201,7 +209,7 @@ def test_an_interrupted_training_is_continued_by_the_same_command(artifacts: Pat
         "--profile",
         "smoke",
         "--set",
-        "train.iterations=30",
+        f"train.iterations={INTERRUPTED_ITERATIONS}",
         "train.checkpoint_every=1",
     ]
     process = subprocess.Popen(
@@ -226,21 +234,23 @@ def test_an_interrupted_training_is_continued_by_the_same_command(artifacts: Pat
         "the same command continues from it (--force starts over)"
     )
     saved = max(int(p.stem.split("_")[1]) for p in (work / "checkpoints").glob("model_*.pt"))
-    assert 3 <= saved < 30 and not [p for p in folder.iterdir() if not p.name.startswith(".")]
+    assert 3 <= saved < INTERRUPTED_ITERATIONS and not [p for p in folder.iterdir() if not p.name.startswith(".")]
     status = json.loads(cli("status", *args[1:5], "--profile", "smoke", "--set", *args[-2:], "--json").stdout)
     (train,) = [row for row in status["pipelines"][0]["stages"] if row["stage"] == "train"]
     assert train["state"] == "resumable" and str(work) in train["reason"]
     result = cli(*args)  # no --resume: the kept checkpoints are continued, not thrown away
     assert result.returncode == 0, result.stderr
     assert f"continuing the interrupted run from model_{saved}.pt" in result.stderr
-    counts = [int(n) for n in re.findall(r"PPO h1_2: (\d+)/30", result.stderr)]
+    counts = [int(n) for n in re.findall(rf"PPO h1_2: (\d+)/{INTERRUPTED_ITERATIONS}", result.stderr)]
     assert counts and min(counts) > saved  # the progress counts on from the checkpoint
     (done,) = [p for p in folder.iterdir() if not p.name.startswith(".")]
     logged = [row["iteration"] for row in read_training_log(done)]
-    assert logged == list(range(1, 31))  # iterations logged after the last checkpoint are not repeated
+    # iterations logged after the last checkpoint are not repeated
+    assert logged == list(range(1, INTERRUPTED_ITERATIONS + 1))
     assert not list(folder.glob(".work-*"))  # moved into the artifact
 
 
+@pytest.mark.usefixtures("g1_dance_store")
 @pytest.mark.slow
 def test_a_longer_run_with_resume_continues_the_shorter_one_bit_for_bit(artifacts: Path, tmp_path: Path) -> None:
     """`--resume` with more iterations than a finished run continues that run; the result equals the
