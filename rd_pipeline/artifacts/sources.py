@@ -21,8 +21,9 @@ def resolve_source(robot: str | None, motion: str, forced: str | None) -> str:
     for source in SOURCES:
         if _exists(_source_file(robot, motion, source)):
             return source
+    bvh = _source_file(robot, motion, "bvh")
     csv = _source_file(robot, motion, "csv")
-    where = f"{paths.bvh_path(motion)}" + (f" nor {csv}" if csv else " (and no dataset CSV folder is set)")
+    where = f"{bvh}" + (f" nor {csv}" if csv else " (and no dataset CSV folder is set)")
     raise PipelineError(
         f"no data for motion '{motion}': neither {where} exists; `rd-pipeline fetch-lafan` downloads "
         "LAFAN1's BVH files, or point RD_LAFAN_DIR (BVH files), RD_RETARGETED_DIR (dataset CSVs) and "
