@@ -21,6 +21,7 @@ from rd_pipeline.policy_runtime import Policy
 from rd_pipeline.policy_spec import PolicySpec
 from rd_pipeline.rl.env_config import Randomization
 from rd_pipeline.rl.physics import MujocoCpuBackend
+from rd_pipeline.rl.physics.state import PhysicsState
 from rd_pipeline.rl.sim_model import randomized_copy
 from rd_pipeline.rl.terminations import bad_orientation, motion_gap
 
@@ -90,49 +91,105 @@ def run_rollouts(
 ) -> list[Rollout]:
     """Roll out `policy` from each start frame (rollout k on `models[k]`), all in one batched loop;
     the first rollout also keeps its body poses for the recording."""
-    count = len(start_frames)
-    dt = 1.0 / spec.get("rates.control_hz")
-    substeps = protocol.substeps(spec.get("rates.control_hz"))
-    model = models[0]
+    control_hz = spec.get("rates.control_hz")
+    substeps = protocol.substeps(control_hz)
     physics = MujocoCpuBackend(models, protocol.threads)
-    state = physics.state
-    controller = DeployController(spec, model, reference, count)
-    checks = _checks(model, reference, bodies, spec.get("joints.policy"), controller)
-    qpos0, qvel0 = _initial_state(model, reference, start_frames, checks.root_ref)
-    physics.set_state(torch.arange(count), torch.from_numpy(qpos0), torch.from_numpy(qvel0))
-    controller.reset(state.qpos.numpy(), state.qvel.numpy(), start_frames)
-
-    last = reference.n_frames - 1
-    alive = np.ones(count, dtype=bool)
-    ended_by = np.full(count, "", dtype=object)
-    steps = np.zeros(count, dtype=np.int64)
-    errors: list[dict[str, np.ndarray]] = []
-    poses = [(state.body_pos[0].numpy().copy(), state.body_quat[0].numpy().copy())]
-    previous_pos = state.body_pos[:, checks.tracked].numpy().copy()
+    controller = DeployController(spec, models[0], reference, len(start_frames))
+    checks = _checks(models[0], reference, bodies, spec.get("joints.policy"), controller)
+    _place_on_reference(physics, controller, reference, start_frames, checks)
+    tally = _Tally.begin(physics.state, checks, 1.0 / control_hz)
     obs = controller.current()
-    while alive.any():
-        action = policy(obs.astype(np.float32))
-        ctrl = controller.targets(action)
-        physics.step(torch.from_numpy(ctrl), substeps, active=torch.from_numpy(alive))
-        qpos = state.qpos.numpy().copy()
-        qvel = state.qvel.numpy().copy()
-        xpos = state.body_pos.numpy().copy()
-        xquat = state.body_quat.numpy().copy()
+    while tally.alive.any():
+        ctrl = controller.targets(policy(obs.astype(np.float32)))
+        physics.step(torch.from_numpy(ctrl), substeps, active=torch.from_numpy(tally.alive))
+        qpos = physics.state.qpos.numpy().copy()
+        qvel = physics.state.qvel.numpy().copy()
+        xpos = physics.state.body_pos.numpy().copy()
+        xquat = physics.state.body_quat.numpy().copy()
         frame = controller.frame
-        pos = xpos[:, checks.tracked]
-        velocity = (pos - previous_pos) / dt
-        previous_pos = pos
-        errors.append(_step_errors(checks, reference, frame, qpos, qvel, xpos, velocity))
-        poses.append((xpos[0], xquat[0]))
+        velocity = tally.tracked_velocity(xpos[:, checks.tracked])
+        tally.errors.append(_step_errors(checks, reference, frame, qpos, qvel, xpos, velocity))
+        tally.poses.append((xpos[0], xquat[0]))
         causes = _failures(checks, models, physics.datas, reference, frame, xpos, xquat, protocol)
-        failed = causes != ""
-        steps += alive
-        ended_by = np.where(alive & failed, causes, ended_by)
-        alive &= ~failed & (frame < last)
+        tally.record(causes, at_end=frame >= reference.n_frames - 1)
         obs = controller.observe(qpos, qvel)
-    out = _rollouts(start_frames, steps, ended_by, last, errors, poses)
     physics.close()
-    return out
+    return tally.rollouts(start_frames, reference.n_frames - 1)
+
+
+def _place_on_reference(
+    physics: MujocoCpuBackend,
+    controller: DeployController,
+    reference: ReferenceMotion,
+    start_frames: np.ndarray,
+    checks: _Checks,
+) -> None:
+    """Put every rollout on the reference at its start frame, and the controller with it."""
+    qpos0, qvel0 = _initial_state(physics.models[0], reference, start_frames, checks.root_ref)
+    rows = torch.arange(len(start_frames))
+    physics.set_state(rows, torch.from_numpy(qpos0), torch.from_numpy(qvel0))
+    controller.reset(physics.state.qpos.numpy(), physics.state.qvel.numpy(), start_frames)
+
+
+@dataclass
+class _Tally:
+    """What the batched loop gathers as it goes: which rollouts still run, what ended the others,
+    and every step's errors and the first rollout's body poses."""
+
+    alive: np.ndarray
+    ended_by: np.ndarray
+    steps: np.ndarray
+    errors: list[dict[str, np.ndarray]]
+    poses: list[tuple[np.ndarray, np.ndarray]]
+    previous_pos: np.ndarray
+    """(R, tracked, 3) the tracked bodies' positions one control step ago."""
+    dt: float
+    """Seconds per control step."""
+
+    @classmethod
+    def begin(cls, state: PhysicsState, checks: _Checks, dt: float) -> _Tally:
+        count = state.qpos.shape[0]
+        return cls(
+            alive=np.ones(count, dtype=bool),
+            ended_by=np.full(count, "", dtype=object),
+            steps=np.zeros(count, dtype=np.int64),
+            errors=[],
+            poses=[(state.body_pos[0].numpy().copy(), state.body_quat[0].numpy().copy())],
+            previous_pos=state.body_pos[:, checks.tracked].numpy().copy(),
+            dt=dt,
+        )
+
+    def tracked_velocity(self, pos: np.ndarray) -> np.ndarray:
+        """(R, tracked, 3) finite-difference velocity of the tracked bodies over the last step."""
+        velocity = (pos - self.previous_pos) / self.dt
+        self.previous_pos = pos
+        return velocity
+
+    def record(self, causes: np.ndarray, at_end: np.ndarray) -> None:
+        """Count the step for every running rollout; stop those that failed or reached the end."""
+        failed = causes != ""
+        self.steps += self.alive
+        self.ended_by = np.where(self.alive & failed, causes, self.ended_by)
+        self.alive &= ~failed & ~at_end
+
+    def rollouts(self, start_frames: np.ndarray, last: int) -> list[Rollout]:
+        """Per rollout, the steps it survived; the body poses for the first only."""
+        out = []
+        for k in range(len(start_frames)):
+            n = int(self.steps[k])
+            out.append(
+                Rollout(
+                    start_frame=int(start_frames[k]),
+                    steps=n,
+                    completed=not self.ended_by[k],
+                    ended_by=str(self.ended_by[k]),
+                    remaining_steps=int(last - start_frames[k]),
+                    errors={name: np.array([e[name][k] for e in self.errors[:n]]) for name in self.errors[0]},
+                    body_pos=np.stack([p[0] for p in self.poses[: n + 1]]) if k == 0 else None,
+                    body_quat=np.stack([p[1] for p in self.poses[: n + 1]]) if k == 0 else None,
+                )
+            )
+        return out
 
 
 def _checks(
@@ -251,33 +308,6 @@ def _failures(
             found.append(f"floor {touching}")
         causes.append(" + ".join(found))
     return np.array(causes, dtype=object)
-
-
-def _rollouts(
-    start_frames: np.ndarray,
-    steps: np.ndarray,
-    ended_by: np.ndarray,
-    last: int,
-    errors: list[dict[str, np.ndarray]],
-    poses: list[tuple[np.ndarray, np.ndarray]],
-) -> list[Rollout]:
-    """Per rollout, the steps it survived; the body poses for the first only."""
-    out = []
-    for k in range(len(start_frames)):
-        n = int(steps[k])
-        out.append(
-            Rollout(
-                start_frame=int(start_frames[k]),
-                steps=n,
-                completed=not ended_by[k],
-                ended_by=str(ended_by[k]),
-                remaining_steps=int(last - start_frames[k]),
-                errors={name: np.array([e[name][k] for e in errors[:n]]) for name in errors[0]},
-                body_pos=np.stack([p[0] for p in poses[: n + 1]]) if k == 0 else None,
-                body_quat=np.stack([p[1] for p in poses[: n + 1]]) if k == 0 else None,
-            )
-        )
-    return out
 
 
 def _floor_contact(model: mujoco.MjModel, data: mujoco.MjData, floor: list[int], allowed: set[int]) -> str | None:
