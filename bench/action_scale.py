@@ -2,7 +2,7 @@
 
     python bench/action_scale.py --robot h1_2 --motion dance2_subject4 --clip 107:117 --iterations 16000
         [--checkpoint 11400] [--set ...] [--scales 1 0.5 0.25 0] [--starts 10] [--out bench/results/action_scale_h1_2]
-        [--joints '*_shoulder_*' '*_elbow_joint'] [--commit SHA]
+        [--joints '*_shoulder_*' '*_elbow_joint'] [--noise-draws 8] [--commit SHA]
 
 Loads a checkpoint of the finished `train` artifact of that plan (its last one by default) and
 rolls out its mean outputs, multiplied by each scale, from `--starts` evenly spaced frames on the
@@ -10,7 +10,10 @@ nominal training model (primitive collision, training terminations, no randomiza
 zero output: under `selective` the residual joints track the reference and the rest hold the
 default pose. Where a smaller scale survives longer, the policy's own outputs end the rollout.
 `--joints` scales only the outputs of the policy joints matching those globs (the rest stay whole),
-to tell which limbs' outputs do the harm.
+to tell which limbs' outputs do the harm. `--noise-draws K` adds the actor's own Gaussian noise to
+the scaled outputs, as training's rollouts do, and gives per start the median over K seeded draws:
+at scale 0 that is zero output plus the training noise, to tell whether exploration alone ends a
+start's episodes before any output could earn credit there.
 Writes `<out>.json` and `<out>.md`.
 """
 
@@ -59,6 +62,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--scales", type=float, nargs="+", default=[1.0, 0.5, 0.25, 0.0])
     parser.add_argument("--starts", type=int, default=10)
     parser.add_argument("--joints", nargs="+", default=["*"], help="globs of the policy joints to scale")
+    parser.add_argument("--noise-draws", type=int, default=0, help="rollouts with the actor's noise per scale")
     parser.add_argument(
         "--commit", default=None, help="the commit of the installed code that runs this (default: HEAD)"
     )
@@ -81,11 +85,14 @@ def _measure(args: argparse.Namespace) -> dict[str, Any]:
     assert env is not None
     fresh = env.state_dict()
     starts = scoring_starts(env.max_episode_length, env.num_envs)
+    draws = list(range(args.noise_draws)) or [None]
     survival_s = {}
     for scale in args.scales:
-        env.load_state_dict(fresh)
-        seconds = _survival(runner, starts, scale, scaled)
-        survival_s[str(scale)] = [round(float(value), 2) for value in seconds]
+        seconds = []
+        for draw in draws:
+            env.load_state_dict(fresh)
+            seconds.append(_survival(runner, starts, scale, scaled, draw).numpy())
+        survival_s[str(scale)] = [round(float(value), 2) for value in np.median(seconds, axis=0)]
     return {
         "robot": args.robot,
         "motion": args.motion,
@@ -95,6 +102,8 @@ def _measure(args: argparse.Namespace) -> dict[str, Any]:
         "commit": args.commit or head_commit(),
         "scaled_joints": [joint for joint, chosen in zip(runner.job.robot.config.policy_joints, scaled) if chosen],
         "start_s": [round(float(frame) / env.control_hz, 2) for frame in starts],
+        "noise_draws": args.noise_draws,
+        "noise_std": _noise_std(runner) if args.noise_draws else None,
         "survival_s": survival_s,
     }
 
@@ -125,34 +134,63 @@ def _scaled_joints(policy_joints: tuple[str, ...], globs: list[str]) -> torch.Te
     return chosen
 
 
-def _survival(runner: TrainingRunner, starts: torch.Tensor, scale: float, scaled: torch.Tensor) -> torch.Tensor:
-    """Seconds survived from each start with the policy's mean outputs on `scaled` joints times `scale`."""
+def _survival(
+    runner: TrainingRunner, starts: torch.Tensor, scale: float, scaled: torch.Tensor, draw: int | None
+) -> torch.Tensor:
+    """Seconds survived from each start with the policy's mean outputs on `scaled` joints times
+    `scale`, plus the actor's noise seeded by `draw` (None: no noise)."""
     factor = torch.where(scaled, scale, 1.0)
+    actor = runner.ppo.actor
 
     def policy(obs):
-        outputs = runner.ppo.actor(obs, stochastic_output=False)
-        return outputs * factor.to(outputs)
+        if draw is None:
+            outputs = actor(obs, stochastic_output=False)
+            return outputs * factor.to(outputs)
+        sample = actor(obs, stochastic_output=True)
+        mean = actor.output_mean
+        return mean * factor.to(mean) + (sample - mean)
 
+    if draw is not None:
+        torch.manual_seed(draw)
     env = runner.scoring_env
     assert env is not None
     return survival(env, policy, starts)
 
 
+def _noise_std(runner: TrainingRunner) -> list[float]:
+    """The actor's noise std per policy joint, in action units (what the draws added)."""
+    std = runner.ppo.actor.output_std
+    return [round(float(value), 3) for value in std[0]]
+
+
 def _table(result: dict[str, Any]) -> str:
     scales = list(result["survival_s"])
+    noise = " + noise" if result["noise_draws"] else ""
     lines = [
         f"# {result['robot']} {result['motion']} {result['clip']} s, checkpoint {result['checkpoint']} "
         f"(train {result['train_key']}): seconds survived per start on the nominal training model",
         "",
         f"Scaled outputs: {', '.join(result['scaled_joints'])}.",
         "",
-        "| start (s) | " + " | ".join(f"outputs x {scale}" for scale in scales) + " |",
+        *_noise_lines(result),
+        "| start (s) | " + " | ".join(f"outputs x {scale}{noise}" for scale in scales) + " |",
         "|---|" + "---|" * len(scales),
     ]
     for k, start in enumerate(result["start_s"]):
         cells = [f"{result['survival_s'][scale][k]:.2f}" for scale in scales]
         lines.append(f"| {start:.2f} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _noise_lines(result: dict[str, Any]) -> list[str]:
+    if not result["noise_draws"]:
+        return []
+    std = result["noise_std"]
+    return [
+        f"With the actor's noise (std {min(std):.2f}-{max(std):.2f} action units by joint), "
+        f"median of {result['noise_draws']} draws per start.",
+        "",
+    ]
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """`bench/action_scale.py` rolls a trained checkpoint out with its outputs scaled: at scale 1 from
 start 0 it survives exactly as long as the training scored that checkpoint, and a checkpoint
-whose outputs are pushed far off ends sooner at scale 1 than at scale 0."""
+whose outputs are pushed far off ends sooner at scale 1 than at scale 0, as zero output does
+with the actor's noise widened far."""
 
 from __future__ import annotations
 
@@ -60,6 +61,18 @@ def test_scaled_outputs_reproduce_the_logged_score_and_see_a_harmful_policy(arti
     elbows_zeroed = _survival(tmp_path / "elbows", 2, "*_elbow_joint")
     assert elbows_zeroed["1.0"] == harmful["1.0"]
     assert all(bad < zero for bad, zero in zip(elbows_zeroed["0.0"], harmful["0.0"]))
+    # Checkpoint 1's noise widened to 8 action units: zero output plus that noise ends sooner.
+    noisy_path = workspace.training_checkpoints(train)[1]
+    state = torch.load(noisy_path, weights_only=False)
+    state["algorithm"]["actor_state_dict"]["distribution.std_param"].fill_(8.0)
+    torch.save(state, noisy_path)
+    noisy = _scale(tmp_path / "noisy", "--checkpoint", "1", "--scales", "0", "--starts", "4", "--noise-draws", "2")
+    assert noisy.returncode == 0, noisy.stderr
+    result = json.loads((tmp_path / "noisy.json").read_text())
+    assert (result["noise_draws"], set(result["noise_std"])) == (2, {8.0})
+    assert all(shaken < still for shaken, still in zip(result["survival_s"]["0.0"], trained["0.0"]))
+    table = (tmp_path / "noisy.md").read_text()
+    assert "With the actor's noise (std 8.00-8.00 action units by joint), median of 2 draws per start." in table
     none = _scale(tmp_path / "none", "--joints", "*_tail_joint")
     assert none.returncode == 1
     assert none.stderr.strip().startswith(
