@@ -71,6 +71,8 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _measure(args: argparse.Namespace) -> dict[str, Any]:
+    if args.noise_draws < 0:
+        raise ValueError(f"--noise-draws {args.noise_draws}: give 0 (no noise) or more draws")
     sets = (f"train.clip={args.clip}", f"train.iterations={args.iterations}", *args.set)
     plan = workspace.plan(args.robot, args.motion, args.profile, overrides=sets)
     train = workspace.required_artifact(plan, "train")

@@ -78,6 +78,9 @@ def test_scaled_outputs_reproduce_the_logged_score_and_see_a_harmful_policy(arti
     assert none.stderr.strip().startswith(
         "error: --joints *_tail_joint matches no policy joint (left_hip_pitch_joint, "
     )
+    negative = _scale(tmp_path / "negative", "--noise-draws", "-1")
+    assert negative.returncode == 1
+    assert negative.stderr.strip() == "error: --noise-draws -1: give 0 (no noise) or more draws"
     missing = _scale(tmp_path / "missing", "--checkpoint", "3")
     assert missing.returncode == 1
     assert missing.stderr.strip() == f"error: {train} holds no checkpoint 3"
