@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
 from pathlib import Path
 from typing import Any
@@ -22,6 +21,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+from dance_window_stages import survival_cells, survival_fields
 from result_files import write_result
 
 RESULTS = Path(__file__).parent / "results"
@@ -47,17 +47,12 @@ def checkpoint_row(path: Path) -> dict[str, Any]:
     scored = {entry["iteration"]: entry for entry in result["checkpoints"]}
     if checkpoint not in scored:
         raise ValueError(f"{path}: checkpoint {checkpoint} is not among the run's scored checkpoints")
-    zero = result["fixed_grid_zero_action_survival_s"]
     return {
         "result": path.name,
         "checkpoint": checkpoint,
         "samples_m": round(scored[checkpoint]["samples"] / 1e6, 1),
         "training_model_start_zero_s": scored[checkpoint]["training_model_start_zero_s"],
-        "start_zero_s": result["start_zero_s"],
-        "zero_action_start_zero_s": result["zero_action_start_zero_s"],
-        "mean_survival_s": round(result["mean_survival_s"], 2),
-        "zero_action_mean_survival_s": round(statistics.mean(zero), 2),
-        "mean_survival_ceiling_s": result["mean_survival_ceiling_s"],
+        **survival_fields(result),
         "fixed_grid_survival_s": result["fixed_grid_survival_s"],
     }
 
@@ -73,9 +68,7 @@ def _table(rows: list[dict[str, Any]]) -> str:
             str(row["checkpoint"]),
             f"{row['samples_m']} M",
             f"{row['training_model_start_zero_s']:.2f}",
-            f"{row['start_zero_s']:.2f} ({row['zero_action_start_zero_s']:.2f})",
-            f"{row['mean_survival_s']:.2f} ({row['zero_action_mean_survival_s']:.2f}; {row['mean_survival_ceiling_s']:.2f})",
-            ", ".join(f"{value:.2f}" for value in row["fixed_grid_survival_s"]),
+            *survival_cells(row),
         ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

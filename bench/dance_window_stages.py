@@ -48,15 +48,32 @@ def stage_row(path: Path) -> dict[str, Any]:
         "samples_m": round(result["samples"] / 1e6, 1),
         "hours_at_median_iteration": result.get("wall_h_at_median_iteration"),
         "exported_checkpoint": result["exported_checkpoint"],
+        **survival_fields(result),
+        "starts_outlasting_zero_action": sum(ours > theirs for ours, theirs in zip(policy, zero, strict=True)),
+        "starts": len(policy),
+        "fixed_grid_survival_s": policy,
+    }
+
+
+def survival_fields(result: dict[str, Any]) -> dict[str, Any]:
+    """A result file's mesh start-zero and fixed-grid mean beside zero action's, as the tables read them."""
+    zero = result["fixed_grid_zero_action_survival_s"]
+    return {
         "start_zero_s": result["start_zero_s"],
         "zero_action_start_zero_s": result["zero_action_start_zero_s"],
         "mean_survival_s": round(result["mean_survival_s"], 2),
         "zero_action_mean_survival_s": round(statistics.mean(zero), 2),
         "mean_survival_ceiling_s": result["mean_survival_ceiling_s"],
-        "starts_outlasting_zero_action": sum(ours > theirs for ours, theirs in zip(policy, zero, strict=True)),
-        "starts": len(policy),
-        "fixed_grid_survival_s": policy,
     }
+
+
+def survival_cells(row: dict[str, Any]) -> list[str]:
+    """The table cells of `survival_fields` and of the survival from each fixed-grid start."""
+    return [
+        f"{row['start_zero_s']:.2f} ({row['zero_action_start_zero_s']:.2f})",
+        f"{row['mean_survival_s']:.2f} ({row['zero_action_mean_survival_s']:.2f}; {row['mean_survival_ceiling_s']:.2f})",
+        ", ".join(f"{value:.2f}" for value in row["fixed_grid_survival_s"]),
+    ]
 
 
 def _table(rows: list[dict[str, Any]]) -> str:
@@ -67,16 +84,17 @@ def _table(rows: list[dict[str, Any]]) -> str:
     ]
     for row in rows:
         hours = row["hours_at_median_iteration"]
+        start_zero, grid_mean, per_start = survival_cells(row)
         cells = [
             row["result"],
             row["failure_credit"],
             f"{row['samples_m']} M",
             "" if hours is None else f"{hours:.2f}",
             str(row["exported_checkpoint"]),
-            f"{row['start_zero_s']:.2f} ({row['zero_action_start_zero_s']:.2f})",
-            f"{row['mean_survival_s']:.2f} ({row['zero_action_mean_survival_s']:.2f}; {row['mean_survival_ceiling_s']:.2f})",
+            start_zero,
+            grid_mean,
             f"{row['starts_outlasting_zero_action']} of {row['starts']}",
-            ", ".join(f"{value:.2f}" for value in row["fixed_grid_survival_s"]),
+            per_start,
         ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
