@@ -98,6 +98,7 @@ def run_rollouts(
     checks = _checks(models[0], reference, bodies, spec.get("joints.policy"), controller)
     _place_on_reference(physics, controller, reference, start_frames, checks)
     tally = _Tally.begin(physics.state, checks, 1.0 / control_hz)
+    last = reference.n_frames - 1
     obs = controller.current()
     while tally.alive.any():
         ctrl = controller.targets(policy(obs.astype(np.float32)))
@@ -111,10 +112,10 @@ def run_rollouts(
         tally.errors.append(_step_errors(checks, reference, frame, qpos, qvel, xpos, velocity))
         tally.poses.append((xpos[0], xquat[0]))
         causes = _failures(checks, models, physics.datas, reference, frame, xpos, xquat, protocol)
-        tally.record(causes, at_end=frame >= reference.n_frames - 1)
+        tally.record(causes, at_end=frame >= last)
         obs = controller.observe(qpos, qvel)
     physics.close()
-    return tally.rollouts(start_frames, reference.n_frames - 1)
+    return tally.rollouts(start_frames, last)
 
 
 def _place_on_reference(
