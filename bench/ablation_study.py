@@ -228,6 +228,22 @@ def markdown(result: dict) -> str:
             f"{result['robot']}, {result['clip']}, `{result['profile']}` profile, "
             f"{result['samples_per_trial']} samples per trial. Written by `bench/ablation_study.py`."
         ),
+    ]
+    lines += _arm_table_lines(result, columns)
+    lines += _seed_table_lines(result, columns)
+    lines += _curve_table_lines(result)
+    lines += _claim_table_lines(result)
+    lines += failure_ema_lines(result)
+    lines += _paper_table_lines(spec, columns)
+    return "\n".join(lines) + "\n"
+
+
+def _table_head(*names: str) -> list[str]:
+    return ["| " + " | ".join(names) + " |", "|" + "---|" * len(names)]
+
+
+def _arm_table_lines(result: dict, columns: tuple[str, ...]) -> list[str]:
+    lines = [
         "",
         (
             "Mean ± 95 % Student-t half-width over seeds. start_zero_s: one deterministic rollout from frame 0; "
@@ -235,37 +251,47 @@ def markdown(result: dict) -> str:
             "wall_min: the train stage's minutes (a grown training adds the run it continued)."
         ),
         "",
-        "| arm | n | " + " | ".join(columns) + " |",
-        "|" + "---|" * (len(columns) + 2),
+        *_table_head("arm", "n", *columns),
     ]
     for arm in result["arms"]:
         cells = " | ".join(format_cell(arm["table"][m]) for m in columns)
         lines.append(f"| {arm['arm']} | {len(arm['seeds'])} | {cells} |")
-    lines += ["", "Per seed:", "", "| arm | seed | " + " | ".join(columns) + " |", "|" + "---|" * (len(columns) + 2)]
+    return lines
+
+
+def _seed_table_lines(result: dict, columns: tuple[str, ...]) -> list[str]:
+    lines = ["", "Per seed:", "", *_table_head("arm", "seed", *columns)]
     for arm in result["arms"]:
-        for s in arm["seeds"]:
-            values = " | ".join(f"{s[m]}" for m in columns)
-            lines.append(f"| {arm['arm']} | {s['seed']} | {values} |")
+        for seed in arm["seeds"]:
+            values = " | ".join(f"{seed[m]}" for m in columns)
+            lines.append(f"| {arm['arm']} | {seed['seed']} | {values} |")
+    return lines
+
+
+def _curve_table_lines(result: dict) -> list[str]:
     window = result["curve_window"]
-    lines += [
+    lines = [
         "",
         f"Learning curves (mean ± 95 % CI over seeds): training episode length over the first and the last "
         f"{window} iterations, and the mean reward per step over the last {window}.",
         "",
-        "| arm | " + " | ".join(CURVE_STATISTICS) + " |",
-        "|" + "---|" * (len(CURVE_STATISTICS) + 1),
+        *_table_head("arm", *CURVE_STATISTICS),
     ]
     for arm in result["arms"]:
-        lines.append(f"| {arm['arm']} | " + " | ".join(format_cell(arm["table"][m]) for m in CURVE_STATISTICS) + " |")
-    lines += [
+        cells = " | ".join(format_cell(arm["table"][m]) for m in CURVE_STATISTICS)
+        lines.append(f"| {arm['arm']} | {cells} |")
+    return lines
+
+
+def _claim_table_lines(result: dict) -> list[str]:
+    lines = [
         "",
         "The paper's findings against these seeds: the difference of the two arms' means with Welch's 95 % "
         "interval, signed so that a positive value favours the finding (for errors: the other arm's minus the "
         "better arm's). Supported when the interval lies above zero, contradicted when below, undecided when "
         "it holds zero.",
         "",
-        "| finding | metric | seeds | difference | 95 % interval | verdict |",
-        "|---|---|---|---|---|---|",
+        *_table_head("finding", "metric", "seeds", "difference", "95 % interval", "verdict"),
     ]
     for claim in result["claims"]:
         interval = "–" if claim["low"] is None else f"[{claim['low']}, {claim['high']}]"
@@ -274,31 +300,38 @@ def markdown(result: dict) -> str:
         lines.append(
             f"| {claim['claim']} | {claim['metric']} | {seeds} | {difference} | {interval} | {claim['verdict']} |"
         )
-    lines += failure_ema_lines(result)
-    quoted = sorted({column for row in spec.paper.values() for column in row}, key=columns.index)
-    lines += ["", spec.paper_caption, "", "| arm | " + " | ".join(quoted) + " |", "|" + "---|" * (len(quoted) + 1)]
-    for arm, row in spec.paper.items():
-        lines.append(f"| {arm} | " + " | ".join(row.get(c, "–") for c in quoted) + " |")
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def failure_ema_lines(result: dict) -> list[str]:
-    """How much the failure prior had to go on: segments whose failure EMA is saturated at the end."""
-    lines = [
-        "",
-        f"The sampler's failure EMA per segment at the last checkpoint. A prior over segments that all "
-        f"fail (EMA >= {SATURATED_EMA}) is flat: it cannot prefer the hard ones.",
-        "",
-        "| arm | seed | segments | saturated | lowest EMA |",
-        "|---|---|---|---|---|",
-    ]
+    """How much the failure prior had to go on: segments whose failure EMA is saturated at the end
+    (no lines where no trial's sampler kept one, as under a uniform sampler)."""
+    rows = []
     for arm in result["arms"]:
         for seed in arm["seeds"]:
             ema = np.asarray(seed.get("failure_ema", []))
             if ema.size == 0:
                 continue
             saturated = int(np.sum(ema >= SATURATED_EMA))
-            lines.append(f"| {arm['arm']} | {seed['seed']} | {ema.size} | {saturated} | {ema.min():.2f} |")
+            rows.append(f"| {arm['arm']} | {seed['seed']} | {ema.size} | {saturated} | {ema.min():.2f} |")
+    if not rows:
+        return []
+    return [
+        "",
+        f"The sampler's failure EMA per segment at the last checkpoint. A prior over segments that all "
+        f"fail (EMA >= {SATURATED_EMA}) is flat: it cannot prefer the hard ones.",
+        "",
+        *_table_head("arm", "seed", "segments", "saturated", "lowest EMA"),
+        *rows,
+    ]
+
+
+def _paper_table_lines(spec: StudySpec, columns: tuple[str, ...]) -> list[str]:
+    """The paper's own figures for the arms, in the columns it reports."""
+    quoted = tuple(sorted({column for row in spec.paper.values() for column in row}, key=columns.index))
+    lines = ["", spec.paper_caption, "", *_table_head("arm", *quoted)]
+    for arm, row in spec.paper.items():
+        lines.append(f"| {arm} | " + " | ".join(row.get(c, "–") for c in quoted) + " |")
     return lines
 
 
