@@ -49,7 +49,7 @@ def main() -> None:
         if args.action == "save":
             _save(plan, key, work, args)
         elif args.action == "restore":
-            _restore(work, args.state)
+            _restore(args, work)
         else:
             _fork(plan, key, work, _plan(args, args.at))
     except (PipelineError, ValueError, OSError) as exc:
@@ -86,14 +86,26 @@ def _save(plan: workspace.Plan, key: str, work: Path, args: argparse.Namespace) 
         "clip": args.clip,
         "train_key": key,
         "iteration": iteration,
+        "iterations": args.iterations,
         "checkpoint": newest.name,
     }
     (args.state / STATE_FILE).write_text(json.dumps(state, indent=2) + "\n")
     print(f"saved {newest.name} of train {key} to {args.state}")
 
 
-def _restore(work: Path, state_dir: Path) -> None:
+def _restore(args: argparse.Namespace, work: Path) -> None:
+    state_dir = args.state
     state = json.loads((state_dir / STATE_FILE).read_text())
+    # The iteration count keys a run but changes nothing it trains: the saved run's key is
+    # computed with the count it was saved under, whatever count it grows to now.
+    saved = _plan(args, state.get("iterations", state["iteration"])).stage("train").key
+    if saved != state["train_key"]:
+        # Other code or arguments: the checkpoint would continue a run it never was.
+        raise ValueError(
+            f"{state_dir / STATE_FILE} holds a checkpoint of train {state['train_key']}, "
+            f"but this code and these arguments make train {saved}: "
+            "restore with the code and arguments that trained it"
+        )
     if checkpoints_by_iteration(work):
         raise ValueError(f"{work} already holds checkpoints: continue it as it is")
     (work / CHECKPOINT_DIR).mkdir(parents=True, exist_ok=True)

@@ -19,9 +19,10 @@ from typing import Any
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.report import REPORT_MD, plot_report, write_json, write_markdown
-from rd_pipeline.evaluation.validation import load_exported_spec, reference_clip, validate_policy
+from rd_pipeline.evaluation.validation import load_exported_spec, reference_clip, rollout_scene, validate_policy
 from rd_pipeline.evaluation.validation_config import ValidationConfig
 from rd_pipeline.robots import load_robot
+from rd_pipeline.viz.render import render_pictures
 
 REFERENCE_STAGES = ("retarget", "import")
 
@@ -30,16 +31,22 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("export", type=Path, help="an export artifact's folder")
     parser.add_argument("--out", type=Path, required=True, help="folder for report.json, report.md and plots")
+    parser.add_argument(
+        "--rule",
+        default="",
+        help="what chose the export's checkpoint, for an export older than policy.json's `checkpoint` block",
+    )
     args = parser.parse_args()
     try:
-        revalidate(args.export.resolve(), args.out)
+        revalidate(args.export.resolve(), args.out, args.rule)
     except (PipelineError, OSError) as exc:
         sys.exit(f"error: {args.export}: {exc}")
     print((args.out / REPORT_MD).read_text())
 
 
-def revalidate(export: Path, out: Path) -> None:
-    """Validate the export artifact in `export` (an absolute path into a store) into `out`."""
+def revalidate(export: Path, out: Path, rule: str = "") -> None:
+    """Validate the export artifact in `export` (an absolute path into a store) into `out`;
+    `rule` names what chose its checkpoint where the export does not say."""
     manifest = _export_manifest(export)
     reference_key = manifest["metrics"]["reference_key"]
     store = export.parents[3]  # <store>/export/<robot>/<motion>/<key>
@@ -47,9 +54,14 @@ def revalidate(export: Path, out: Path) -> None:
     spec = load_exported_spec(export, reference_key)
     clip = reference_clip(spec, stage, reference_key, folder)
     robot = load_robot(manifest["robot"])
-    validation = validate_policy(robot, manifest["motion"], export, manifest["key"], clip, ValidationConfig())
+    config = ValidationConfig()
+    validation = validate_policy(robot, manifest["motion"], export, manifest["key"], clip, config)
     out.mkdir(parents=True, exist_ok=True)
     report = validation.report.details
+    if rule and not report["checkpoint"]:
+        report["checkpoint"] = {"iteration": manifest["metrics"]["checkpoint_iteration"], "rule": rule}
+    title = f"{manifest['robot']} {manifest['motion']}, policy {manifest['key']}, nominal start-zero rollout"
+    report["pictures"] = render_pictures(validation.model, rollout_scene(validation, clip, title), config.render, out)
     write_json(report, out)
     write_markdown(report, out)
     plot_report(report, out)

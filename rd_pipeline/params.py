@@ -31,6 +31,14 @@ def require_positive(params: object, *fields: str) -> None:
             raise ParamRangeError(field, f"must be positive, got {value}")
 
 
+def require_non_negative(params: object, *fields: str) -> None:
+    """Raise `ParamRangeError` for the first of `fields` of `params` that is below 0."""
+    for field in fields:
+        value = getattr(params, field)
+        if not value >= 0:
+            raise ParamRangeError(field, f"must be at least 0, got {value}")
+
+
 def require_at_most(params: object, limit: float, *fields: str) -> None:
     """Raise `ParamRangeError` for the first of `fields` of `params` above `limit`."""
     for field in fields:

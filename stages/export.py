@@ -4,34 +4,37 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from rd_pipeline.artifacts.stage import Stage, StageContext, typed_config
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.params import ParamRangeError
 from rd_pipeline.rl.training_config import TrainConfig
-from rd_pipeline.rl.training_log import ScoreFirst, best_held
+from rd_pipeline.rl.training_log import ScoreFirst, best_held, checkpoints_by_iteration
 from rd_pipeline.robots.assets import model_files
+
+Selection = Literal["last", "start_zero", "completion"]
 
 
 @dataclass(frozen=True)
 class ExportConfig:
-    """Which checkpoint goes to the robot."""
+    """Which checkpoint goes to the robot, and the rule that chose it (the validation report
+    names it)."""
 
     checkpoint: int = 0
-    """Training iteration of the checkpoint to export (0: the one `train` scored best, as `best_by`
-    orders the scores)."""
-    best_by: ScoreFirst = "start_zero"
-    """Which score of `train`'s checkpoint scoring comes first: `start_zero` (survival from the
-    clip's first frame on nominal physics) or `completion` (the mean fraction of the clip left
-    that it survives from `train.scoring_starts` evenly spaced starts, frame 0 among them, which
-    favours a policy that also lasts from starts in the middle of the clip); ties go to the other
-    score, then to the latest checkpoint. Train's `best_checkpoint` and its plot's star are the
-    `start_zero` choice. Only with `checkpoint` 0; refused beside a chosen one."""
+    """Training iteration of the checkpoint to export (0: as `best_by` says)."""
+    best_by: Selection = "last"
+    """`last`: the run's last checkpoint, fixed by iteration before anything is looked at, as the
+    paper compares methods. `start_zero` or `completion`: the held checkpoint `train` scored best,
+    that score first (`start_zero`: survival from the clip's first frame; `completion`: the mean
+    fraction of the clip left that it survives from `train.scoring_starts` evenly spaced starts),
+    ties to the other, then to the latest. Train scores on the training model under randomized
+    physics drawn from `train.scoring_seed`, a score no validation protocol repeats. Only with
+    `checkpoint` 0; refused beside a chosen one."""
 
     def __post_init__(self) -> None:
         # A chosen checkpoint with a ranking would key a second artifact of the same export.
-        if self.checkpoint and self.best_by != "start_zero":
+        if self.checkpoint and self.best_by != "last":
             raise ParamRangeError(
                 "best_by",
                 f"ranks checkpoints only when checkpoint is 0, got checkpoint {self.checkpoint} (drop one of the two)",
@@ -55,25 +58,38 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         reference_stage=reference.stage,
         reference_key=reference.key,
     )
-    checkpoint = ctx.params.checkpoint or _best(train.path, ctx.params.best_by)
-    return export_policy(trained, load_robot(ctx.robot_name), checkpoint, ctx.out_dir)
+    checkpoint, rule = _choose(train.path, ctx.params)
+    return export_policy(trained, load_robot(ctx.robot_name), checkpoint, rule, ctx.out_dir)
 
 
-def _best(train: Path, best_by: ScoreFirst) -> int:
+def _choose(train: Path, params: ExportConfig) -> tuple[int, str]:
+    """The checkpoint to export and the rule that chose it, in words."""
+    if params.checkpoint:
+        return params.checkpoint, f"export.checkpoint={params.checkpoint}, fixed by iteration"
+    if params.best_by == "last":
+        held = checkpoints_by_iteration(train)
+        if not held:
+            raise PipelineError(f"{train}: holds no checkpoint")
+        return max(held), "the run's last checkpoint, fixed by iteration before looking"
+    best_by: ScoreFirst = params.best_by
     best = best_held(train, best_by)
     if best is None:
         raise PipelineError(f"{train}: holds no scored checkpoint")
-    return best["iteration"]
+    rule = (
+        f"the best {best_by} score among held checkpoints, scored by train on the training model "
+        "under randomized physics of its own seed (not a validation protocol)"
+    )
+    return best["iteration"], rule
 
 
 STAGE = Stage(
     name="export",
-    version=5,
+    version=6,
     description="trained actor -> policy.pt (TorchScript) + policy.json (gains, scales, mask, obs layout, rates)",
     params=ExportConfig,
     provides="deployable_policy",
     run=_run,
     inputs=lambda robot, motion: model_files(robot),
     requires=("policy", "reference"),
-    headline=("num_actions", "action_mode"),
+    headline=("checkpoint_iteration", "num_actions", "action_mode"),
 )

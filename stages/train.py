@@ -119,7 +119,7 @@ def _longest_shorter_run(runs: tuple[ArtifactRef, ...], iterations: int) -> Shor
 
 STAGE = Stage(
     name="train",
-    version=6,
+    version=7,
     description="reference + prior -> residual-action PPO policy (multi-head critic, segment sampler)",
     params=TrainConfig,
     provides="policy",

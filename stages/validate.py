@@ -5,17 +5,17 @@ from __future__ import annotations
 from typing import Any
 
 from rd_pipeline.artifacts.stage import Stage, StageContext
+from rd_pipeline.evaluation.report import RECORDING_FILE
 from rd_pipeline.evaluation.validation_config import ValidationConfig
 from rd_pipeline.robots.assets import model_files
-
-RECORDING_FILE = "sim2sim.rrd"
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.evaluation.report import CONTROLLERS, plot_report, write_json, write_markdown
-    from rd_pipeline.evaluation.validation import load_exported_spec, reference_clip, validate_policy
+    from rd_pipeline.evaluation.validation import load_exported_spec, reference_clip, rollout_scene, validate_policy
     from rd_pipeline.robots import load_robot
     from rd_pipeline.viz.recording import TRACKED_FILE, record_tracking, save_tracked
+    from rd_pipeline.viz.render import render_pictures
 
     config: ValidationConfig = ctx.params
     exported = ctx.upstream["deployable_policy"]
@@ -23,10 +23,14 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     spec = load_exported_spec(exported.path, made.key)
     clip = reference_clip(spec, made.stage, made.key, made.path)
     robot = load_robot(ctx.robot_name)
-    batches = len(CONTROLLERS) * (1 + len(config.randomized_seeds))
-    with ctx.progress(batches, "sim2sim rollouts") as advance:
+    protocols = 1 + len(config.randomized.seeds) + config.other_physics.enabled
+    with ctx.progress(len(CONTROLLERS) * protocols, "sim2sim rollouts") as advance:
         validation = validate_policy(robot, ctx.motion, exported.path, exported.key, clip, config, advance)
     report = validation.report.details
+    if config.render.enabled:
+        title = f"{ctx.robot} {ctx.motion}, policy {exported.key}, nominal start-zero rollout"
+        scene = rollout_scene(validation, clip, title)
+        report["pictures"] = render_pictures(validation.model, scene, config.render, ctx.out_dir)
     write_json(report, ctx.out_dir)
     write_markdown(report, ctx.out_dir)
     plot_report(report, ctx.out_dir)
@@ -47,13 +51,14 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="validate",
-    version=7,
-    description="exported policy + reference -> sim2sim report (report.json/md, plots, .rrd) beside zero-action",
+    version=8,
+    description="exported policy + reference -> sim2sim report (nominal, randomized, other physics; "
+    "tracking; filmstrip, video, plots, .rrd) beside zero-action",
     params=ValidationConfig,
     provides="validation_report",
     run=_run,
     inputs=lambda robot, motion: model_files(robot),
     requires=("deployable_policy", "reference"),
-    headline=("start_zero_survival_s", "zero_action_start_zero_survival_s", "completion_pct", "E_g_mpbpe"),
+    headline=("start_zero_survival_s", "zero_action_start_zero_survival_s", "completion_pct", "tracked_pct"),
     report="report.md",
 )

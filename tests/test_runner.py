@@ -115,7 +115,7 @@ def test_tuple_parameters_from_set() -> None:
     from rd_pipeline.stages import REGISTRY
 
     validate, train = (next(s for s in REGISTRY if s.name == n) for n in ("validate", "train"))
-    assert build_params(validate, {"randomized_seeds": "[0, 1, 2]"}).randomized_seeds == (0, 1, 2)
+    assert build_params(validate, {"randomized.seeds": "[0, 1, 2]"}).randomized.seeds == (0, 1, 2)
     assert build_params(train, {"env.randomization.push_interval_s": "4,8"}).env.randomization.push_interval_s == (
         4.0,
         8.0,

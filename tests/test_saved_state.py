@@ -111,3 +111,21 @@ def test_a_fork_finishes_a_stage_of_a_longer_run_without_training(artifacts: Pat
     assert again.stderr.strip() == f"error: train {train.key} (2 iterations) is finished already"
     missing = _state("fork", 4, tmp_path, "--at", "5")
     assert missing.stderr.strip() == f"error: train {source.key} holds no checkpoint 5 in {source.path}"
+
+
+def test_restore_refuses_a_checkpoint_of_another_train_key(artifacts: Path, tmp_path: Path) -> None:
+    state = tmp_path / "state"
+    state.mkdir()
+    saved = {"robot": ROBOT, "motion": MOTION, "clip": CLIP, "train_key": "614b15e5ee28"}
+    saved |= {"iteration": 2, "iterations": 2, "checkpoint": "model_2.pt"}
+    (state / "state.json").write_text(json.dumps(saved))
+    restored = _state("restore", 4, state)
+    key = _plan(2).stage("train").key
+    assert restored.returncode == 1
+    assert restored.stderr.strip() == (
+        f"error: {state / 'state.json'} holds a checkpoint of train 614b15e5ee28, "
+        f"but this code and these arguments make train {key}: "
+        "restore with the code and arguments that trained it"
+    )
+    work = _plan(4).store.work_folder("train", ROBOT, MOTION, _plan(4).stage("train").key)
+    assert not work.exists()

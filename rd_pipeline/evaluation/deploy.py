@@ -9,6 +9,8 @@ backend that training uses on CPU (one physics implementation); one policy call 
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import mujoco
 import numpy as np
 import torch
@@ -51,8 +53,17 @@ def reference_baseline_spec(spec: PolicySpec) -> PolicySpec:
 class DeployController:
     """Observation and action side of the loop for R rollouts at once."""
 
-    def __init__(self, spec: PolicySpec, model: mujoco.MjModel, reference: ReferenceMotion, rollouts: int) -> None:
+    def __init__(
+        self,
+        spec: PolicySpec,
+        model: mujoco.MjModel,
+        reference: ReferenceMotion,
+        rollouts: int,
+        noise: Callable[[dict[str, np.ndarray]], dict[str, np.ndarray]] | None = None,
+    ) -> None:
         self.spec = spec
+        self.noise = noise
+        """Adds sensor noise to an observation frame's terms (None: exact sensors)."""
         joints = spec.get("joints")
         actuated = joints["actuated"]
         policy = joints["policy"]
@@ -93,6 +104,8 @@ class DeployController:
             "last_action": self.last_action,
             "ref_joint_pos_next": self.reference_joints[self._next_frame()],
         }
+        if self.noise is not None:
+            values = self.noise(values)
         return np.concatenate([t["scale"] * values[t["name"]] for t in self.terms], axis=-1)
 
     def reset(self, qpos: np.ndarray, qvel: np.ndarray, frames: np.ndarray) -> None:

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
+    from rd_pipeline.evaluation.protocol import TrackingTolerance
     from rd_pipeline.evaluation.sim2sim import Rollout
 
 ERROR_METRICS = ("E_g_mpbpe", "E_mpbpe", "E_mpjpe", "E_mpjve", "E_mpbve")
@@ -104,3 +105,39 @@ def difference_interval(first: list[float], second: list[float]) -> dict[str, fl
         "low": round(float(interval.low), 3),
         "high": round(float(interval.high), 3),
     }
+
+
+def tracked_steps(rollout: Rollout, tolerance: TrackingTolerance) -> np.ndarray:
+    """(steps,) whether each step survived was tracked: mean joint error and mean pelvis-relative
+    body error both within `tolerance`."""
+    joints = rollout.errors["E_mpjpe"] / 1000.0 <= tolerance.joint_rad
+    bodies = rollout.errors["E_mpbpe"] / 1000.0 <= tolerance.body_m
+    return joints & bodies
+
+
+def tracked_pct(rollouts: list[Rollout], tolerance: TrackingTolerance) -> float:
+    """Share of the steps the rollouts could have lasted (each to the clip's end) that were tracked (%)."""
+    tracked = sum(int(tracked_steps(r, tolerance).sum()) for r in rollouts)
+    most = sum(r.remaining_steps for r in rollouts)
+    return round(100.0 * tracked / max(most, 1), 2)
+
+
+def per_second(rollout: Rollout, control_hz: float, tolerance: TrackingTolerance) -> list[dict[str, float | None]]:
+    """Per second of the clip from the rollout's start: mean joint error (rad), mean pelvis-relative
+    body error (m) and the share of the second tracked (%); errors None once the rollout has ended."""
+    step = int(round(control_hz))
+    tracked = tracked_steps(rollout, tolerance)
+    out: list[dict[str, float | None]] = []
+    for first in range(0, rollout.remaining_steps, step):
+        joints = rollout.errors["E_mpjpe"][first : first + step]
+        bodies = rollout.errors["E_mpbpe"][first : first + step]
+        steps = min(step, rollout.remaining_steps - first)
+        out.append(
+            {
+                "second": first // step,
+                "joint_rad": round(float(joints.mean()) / 1000.0, 4) if len(joints) else None,
+                "body_m": round(float(bodies.mean()) / 1000.0, 4) if len(bodies) else None,
+                "tracked_pct": round(100.0 * float(tracked[first : first + step].sum()) / steps, 1),
+            }
+        )
+    return out

@@ -15,14 +15,13 @@ import numpy as np
 import torch
 
 from rd_pipeline.evaluation.deploy import DeployController
+from rd_pipeline.evaluation.disturbances import Disturbances
 from rd_pipeline.evaluation.protocol import Protocol
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.policy_runtime import Policy
 from rd_pipeline.policy_spec import PolicySpec
-from rd_pipeline.rl.env_config import Randomization
 from rd_pipeline.rl.physics import MujocoCpuBackend
 from rd_pipeline.rl.physics.state import PhysicsState
-from rd_pipeline.rl.sim_model import randomized_copy
 from rd_pipeline.rl.terminations import bad_orientation, motion_gap
 
 
@@ -54,6 +53,8 @@ class Rollout:
     """(steps + 1, nbody, 3) world positions of every body, for the recording (first rollout only)."""
     body_quat: np.ndarray | None
     """(steps + 1, nbody, 4) wxyz (first rollout only)."""
+    qpos: np.ndarray | None = None
+    """(steps + 1, nq) generalized positions, for the rendered pictures (first rollout only)."""
 
 
 @dataclass(frozen=True)
@@ -88,13 +89,16 @@ def run_rollouts(
     start_frames: np.ndarray,
     bodies: BodySets,
     protocol: Protocol,
+    disturbances: Disturbances | None = None,
 ) -> list[Rollout]:
-    """Roll out `policy` from each start frame (rollout k on `models[k]`), all in one batched loop;
-    the first rollout also keeps its body poses for the recording."""
+    """Roll out `policy` from each start frame (rollout k on `models[k]`), all in one batched loop,
+    meeting `disturbances` (delay, pushes, forces, sensor noise) where given; the first rollout
+    also keeps its poses for the recording and the pictures."""
     control_hz = spec.get("rates.control_hz")
     substeps = protocol.substeps(control_hz)
     physics = MujocoCpuBackend(models, protocol.threads)
-    controller = DeployController(spec, models[0], reference, len(start_frames))
+    noise = None if disturbances is None else disturbances.observe
+    controller = DeployController(spec, models[0], reference, len(start_frames), noise)
     checks = _checks(models[0], reference, bodies, spec.get("joints.policy"), controller)
     _place_on_reference(physics, controller, reference, start_frames, checks)
     tally = _Tally.begin(physics.state, checks, 1.0 / control_hz)
@@ -102,7 +106,14 @@ def run_rollouts(
     obs = controller.current()
     while tally.alive.any():
         ctrl = controller.targets(policy(obs.astype(np.float32)))
-        physics.step(torch.from_numpy(ctrl), substeps, active=torch.from_numpy(tally.alive))
+        force = None
+        if disturbances is not None:
+            ctrl = disturbances.delayed(ctrl)
+            pushed, velocity = disturbances.push_due()
+            physics.push(torch.from_numpy(pushed), torch.from_numpy(velocity))
+            force = torch.from_numpy(disturbances.joint_force(models[0].nv))
+        active = torch.from_numpy(tally.alive)
+        physics.step(torch.from_numpy(ctrl), substeps, joint_force=force, active=active)
         qpos = physics.state.qpos.numpy().copy()
         qvel = physics.state.qvel.numpy().copy()
         xpos = physics.state.body_pos.numpy().copy()
@@ -110,7 +121,7 @@ def run_rollouts(
         frame = controller.frame
         velocity = tally.tracked_velocity(xpos[:, checks.tracked])
         tally.errors.append(_step_errors(checks, reference, frame, qpos, qvel, xpos, velocity))
-        tally.poses.append((xpos[0], xquat[0]))
+        tally.poses.append((xpos[0], xquat[0], qpos[0]))
         causes = _failures(checks, models, physics.datas, reference, frame, xpos, xquat, protocol)
         tally.record(causes, at_end=frame >= last)
         obs = controller.observe(qpos, qvel)
@@ -126,7 +137,7 @@ def _place_on_reference(
     checks: _Checks,
 ) -> None:
     """Put every rollout on the reference at its start frame, and the controller with it."""
-    qpos0, qvel0 = _initial_state(physics.models[0], reference, start_frames, checks.root_ref)
+    qpos0, qvel0 = reference_states(physics.models[0], reference, start_frames, checks.root_ref)
     rows = torch.arange(len(start_frames))
     physics.set_state(rows, torch.from_numpy(qpos0), torch.from_numpy(qvel0))
     controller.reset(physics.state.qpos.numpy(), physics.state.qvel.numpy(), start_frames)
@@ -141,7 +152,7 @@ class _Tally:
     ended_by: np.ndarray
     steps: np.ndarray
     errors: list[dict[str, np.ndarray]]
-    poses: list[tuple[np.ndarray, np.ndarray]]
+    poses: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
     previous_pos: np.ndarray
     """(R, tracked, 3) the tracked bodies' positions one control step ago."""
     dt: float
@@ -155,7 +166,13 @@ class _Tally:
             ended_by=np.full(count, "", dtype=object),
             steps=np.zeros(count, dtype=np.int64),
             errors=[],
-            poses=[(state.body_pos[0].numpy().copy(), state.body_quat[0].numpy().copy())],
+            poses=[
+                (
+                    state.body_pos[0].numpy().copy(),
+                    state.body_quat[0].numpy().copy(),
+                    state.qpos[0].numpy().copy(),
+                )
+            ],
             previous_pos=state.body_pos[:, checks.tracked].numpy().copy(),
             dt=dt,
         )
@@ -188,6 +205,7 @@ class _Tally:
                     errors={name: np.array([e[name][k] for e in self.errors[:n]]) for name in self.errors[0]},
                     body_pos=np.stack([p[0] for p in self.poses[: n + 1]]) if k == 0 else None,
                     body_quat=np.stack([p[1] for p in self.poses[: n + 1]]) if k == 0 else None,
+                    qpos=np.stack([p[2] for p in self.poses[: n + 1]]) if k == 0 else None,
                 )
             )
         return out
@@ -224,13 +242,13 @@ def _checks(
     )
 
 
-def _initial_state(
+def reference_states(
     model: mujoco.MjModel,
     reference: ReferenceMotion,
     start_frames: np.ndarray,
     root_ref: int,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(R, nq) qpos and (R, nv) qvel of the reference at each start frame (the base's angular
+    """(R, nq) qpos and (R, nv) qvel of the reference at each of `start_frames` (the base's angular
     velocity turned into its own frame, as MuJoCo's free joint holds it)."""
     count = len(start_frames)
     qpos0 = np.zeros((count, model.nq))
@@ -322,19 +340,3 @@ def _floor_contact(model: mujoco.MjModel, data: mujoco.MjData, floor: list[int],
             if body not in allowed:
                 return model.body(body).name or f"body {body}"
     return None
-
-
-def randomized_models(
-    model: mujoco.MjModel, count: int, rng: np.random.Generator, ranges: Randomization = Randomization()
-) -> list[mujoco.MjModel]:
-    """`count` copies of `model` with link mass, ground friction and PD gains drawn per copy from
-    `ranges`: the optional randomized evaluation. Validation passes the default ranges (the
-    paper's training ranges), whatever ranges the policy trained with, so that every policy is
-    scored on the same physics."""
-    out = []
-    for _ in range(count):
-        mass = rng.uniform(*ranges.mass_factor)
-        friction = rng.uniform(*ranges.friction_factor)
-        gains = rng.uniform(*ranges.pd_factor, size=2)
-        out.append(randomized_copy(model, mass, friction, gains[0], gains[1]))
-    return out

@@ -6,18 +6,51 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from rd_pipeline.evaluation.protocol import Protocol
+from rd_pipeline.evaluation.protocol import OtherPhysics, Protocol, RandomizedProtocol, TrackingTolerance
 from rd_pipeline.params import require_positive
 
 
 @dataclass(frozen=True)
+class RenderConfig:
+    """Pictures of the start-zero rollout beside its reference (MuJoCo offscreen, headless)."""
+
+    enabled: bool = True
+    """Off: no filmstrip and no video."""
+    width: int = 480
+    """Pixels of one view, across."""
+    height: int = 360
+    """Pixels of one view, down."""
+    filmstrip_frames: int = 6
+    """Views in the filmstrip, evenly spaced over the clip."""
+    video_fps: int = 25
+    """Frame rate of the MP4 (the policy's steps are subsampled to it)."""
+    video_max_s: float = 20.0
+    """The MP4 shows at most this much of the rollout (a whole take would take minutes to render)."""
+    timeout_s: float = 600.0
+    """Rendering that takes longer is given up, and the report says so."""
+    beside_m: float = 1.0
+    """How far to the side of the tracked robot the reference is drawn."""
+
+    def __post_init__(self) -> None:
+        require_positive(
+            self, "width", "height", "filmstrip_frames", "video_fps", "video_max_s", "timeout_s", "beside_m"
+        )
+
+
+@dataclass(frozen=True)
 class ValidationConfig:
-    """The evaluation protocol."""
+    """The evaluation protocols and what the report shows of them."""
 
     protocol: Protocol = Protocol()
-    """Start grid, failure thresholds, threads."""
-    randomized_seeds: tuple[int, ...] = ()
-    """Also evaluate on randomized physics, once per seed (empty: nominal only)."""
+    """Start grid, failure thresholds, threads (every protocol's)."""
+    randomized: RandomizedProtocol = RandomizedProtocol()
+    """Rollouts under the paper's randomization and sensor noise, on seeds of their own."""
+    other_physics: OtherPhysics = OtherPhysics()
+    """Rollouts on physics other than training's."""
+    tracking: TrackingTolerance = TrackingTolerance()
+    """When a step counts as tracked, for the share of the clip tracked."""
+    render: RenderConfig = RenderConfig()
+    """The filmstrip and the video."""
     bootstrap_seed: int = 0
     """Seeds the bootstrap of the drift CI."""
     bootstrap_resamples: int = 1000

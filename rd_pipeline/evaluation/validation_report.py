@@ -31,6 +31,13 @@ class ValidationReport:
     """Mean per-body position error in the world frame (mm) over every step survived."""
     E_mpjpe: float | None
     """Mean per-joint position error (mrad)."""
+    tracked_pct: float
+    """Share of the clip the nominal start-zero rollout tracked within the tolerances (%)."""
+    checkpoint_rule: str
+    """What chose the exported checkpoint."""
+    protocols: dict[str, Any]
+    """Per protocol (nominal, randomized, other physics) and controller: start-zero, completion,
+    mean survival and tracked share, each a mean with its 95% CI."""
     runtime: str
     """Which exported file ran the loop."""
     onnx_vs_torchscript_max_abs_diff: float
@@ -55,6 +62,9 @@ class ValidationReport:
             zero_action_mean_survival_s=zero["fixed_grid"]["mean_survival_s"],
             E_g_mpbpe=policy["fixed_grid"]["E_g_mpbpe"],
             E_mpjpe=policy["fixed_grid"]["E_mpjpe"],
+            tracked_pct=details["tracking"]["start_zero_tracked_pct"]["policy"],
+            checkpoint_rule=details["checkpoint"].get("rule", "not recorded by this export"),
+            protocols=_headline_protocols(details["protocols"]),
             runtime=details["runtime"]["ran"],
             onnx_vs_torchscript_max_abs_diff=details["runtime"]["onnx_vs_torchscript_max_abs_diff"],
             details=details,
@@ -64,3 +74,17 @@ class ValidationReport:
     def load(cls, folder: Path) -> ValidationReport:
         """The report of a validate artifact."""
         return cls.from_details(json.loads((folder / REPORT_JSON).read_text()))
+
+
+HEADLINE_FIGURES = ("start_zero_s", "completion_pct", "mean_survival_s", "tracked_pct")
+"""What the manifest keeps of each protocol, per controller."""
+
+
+def _headline_protocols(protocols: dict[str, Any]) -> dict[str, Any]:
+    return {
+        protocol: {
+            controller: {figure: figures[controller][figure] for figure in HEADLINE_FIGURES}
+            for controller in ("policy", "zero_action")
+        }
+        for protocol, figures in protocols.items()
+    }

@@ -42,9 +42,10 @@ class TrainedPolicy:
     """That reference artifact's key."""
 
 
-def export_policy(trained: TrainedPolicy, robot: Robot, iteration: int, out_dir: Path) -> dict[str, Any]:
+def export_policy(trained: TrainedPolicy, robot: Robot, iteration: int, rule: str, out_dir: Path) -> dict[str, Any]:
     """Write `policy.pt`, `policy.json` and `policy.onnx` of the checkpoint saved after `iteration`
-    iterations into `out_dir`; returns the export's metrics."""
+    iterations, chosen by `rule` (in words, for the reports), into `out_dir`; returns the export's
+    metrics."""
     checkpoints = checkpoints_by_iteration(trained.folder)
     if not checkpoints:
         raise PipelineError(f"{trained.folder}: the training artifact has no checkpoints")
@@ -62,12 +63,14 @@ def export_policy(trained: TrainedPolicy, robot: Robot, iteration: int, out_dir:
         trained.reference_key,
         trained.clip_frames,
     )
+    spec.data["checkpoint"] = {"iteration": iteration, "rule": rule}
     spec.save(out_dir / SPEC_FILE)
     load_policy_spec(out_dir / SPEC_FILE)  # what we wrote must pass the deploy-side check
     export_onnx(actor.as_jit().cpu(), trained.observation_size, spec, out_dir / ONNX_FILE)
     gap, onnx_gap = _file_gaps(actor, scripted, out_dir / ONNX_FILE, trained.observation_size)
     return {
         "checkpoint_iteration": iteration,
+        "checkpoint_rule": rule,
         "observation_size": trained.observation_size,
         "num_actions": trained.num_actions,
         "action_mode": spec.get("action.mode"),

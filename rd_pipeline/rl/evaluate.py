@@ -1,4 +1,5 @@
-"""Deterministic rollouts on nominal physics: how long a policy (or the zero-action baseline) survives."""
+"""Deterministic rollouts: how long a policy (or the zero-action baseline) survives, on nominal
+physics or on the fixed randomized physics checkpoints are scored on."""
 
 from __future__ import annotations
 
@@ -23,6 +24,16 @@ def nominal(config: EnvConfig, num_envs: int) -> EnvConfig:
         rsi_root_pos_m=0.0,
         rsi_root_rot_deg=0.0,
         rsi_root_vel=0.0,
+    )
+
+
+def scoring(config: EnvConfig, num_envs: int) -> EnvConfig:
+    """Where checkpoints are scored: training's randomized physics (drawn from the scoring
+    environment's own seed) with no reset noise, so that the score that may choose a checkpoint
+    is one no validation protocol repeats."""
+    return dataclasses.replace(
+        nominal(config, num_envs),
+        randomization=config.randomization,
     )
 
 

@@ -22,7 +22,7 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.rl.distributed import ONE_PROCESS, Ranks
 from rd_pipeline.rl.env import TrackingEnv
-from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal
+from rd_pipeline.rl.evaluate import checkpoint_scorer, scoring
 from rd_pipeline.rl.ppo import MultiHeadPPO, build_ppo
 from rd_pipeline.rl.rewards import GROUPS
 from rd_pipeline.rl.trainer import load_checkpoint, train
@@ -137,8 +137,8 @@ class TrainingRunner:
                 SegmentSampler(config.sampler, balanced, seed=config.seed),
                 segments.starts,
                 segments.lengths,
-                nominal(config.env, config.scoring_starts),
-                seed=config.seed,
+                scoring(config.env, config.scoring_starts),
+                seed=config.scoring_seed,
             )
 
     def learn(self, on_iteration: Callable[[dict], None]) -> None:

@@ -33,9 +33,11 @@ class TrainConfig:
     """Train on part of the motion, `START:END` in seconds (empty: all of it)."""
     scoring_starts: int = 8
     """Start frames, evenly spaced over the clip from frame 0, from which each checkpoint is rolled out
-    with its mean action on nominal physics; `export` takes the best-scored checkpoint, as
-    `export.best_by` orders the scores (late PPO updates can knock back a policy that had learned
-    the clip)."""
+    with its mean action on the training model under randomized physics (the learning curve's
+    score; `export.best_by` may choose a checkpoint by it)."""
+    scoring_seed: int = 7_919
+    """Seeds the scoring environment's randomized physics, pushes and forces: apart from training's
+    `seed` and validation's seeds, so the score is neither's."""
     env: EnvConfig = EnvConfig()
     """Environment."""
     ppo: PpoConfig = PpoConfig()
