@@ -71,15 +71,18 @@ def _choose(train: Path, params: ExportConfig) -> tuple[int, str]:
         if not held:
             raise PipelineError(f"{train}: holds no checkpoint")
         return max(held), "the run's last checkpoint, fixed by iteration before looking"
-    best_by: ScoreFirst = params.best_by
+    rule = (
+        f"the best {params.best_by} score among held checkpoints, scored by train on the training "
+        "model under randomized physics of its own seed (not a validation protocol)"
+    )
+    return _best(train, params.best_by), rule
+
+
+def _best(train: Path, best_by: ScoreFirst) -> int:
     best = best_held(train, best_by)
     if best is None:
         raise PipelineError(f"{train}: holds no scored checkpoint")
-    rule = (
-        f"the best {best_by} score among held checkpoints, scored by train on the training model "
-        "under randomized physics of its own seed (not a validation protocol)"
-    )
-    return best["iteration"], rule
+    return best["iteration"]
 
 
 STAGE = Stage(

@@ -12,7 +12,7 @@ from conftest import PROJECT, h1_2_dance_env
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.rl.actions import ActionConfig
 from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal, scoring_starts, survival, zero_action
+from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal, scoring, scoring_starts, survival, zero_action
 from rd_pipeline.rl.ppo import MultiHeadPPO, build_ppo
 from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.rewards import GROUPS
@@ -43,6 +43,17 @@ def test_a_score_is_the_survival_from_evenly_spaced_starts_and_sees_a_falling_po
     falling = checkpoint_scorer(h1_2_dance_env(nominal(CONFIG, 4)), lambda obs: torch.full((4, env.num_actions), 3.0))()
     assert falling["start_zero_s"] < first["start_zero_s"]
     assert falling["completion"] < first["completion"]
+
+
+def test_checkpoints_are_scored_on_randomized_physics_that_every_call_repeats() -> None:
+    """The score that may choose a checkpoint is not the nominal figure validation reports."""
+    env = h1_2_dance_env(scoring(CONFIG, 4))
+    assert env.config.randomization.enabled and env.config.rsi_joint_pos == 0.0
+    score = checkpoint_scorer(env, zero_action(env.num_actions))
+    first = score()
+    assert score() == first
+    on_nominal = h1_2_dance_env(nominal(CONFIG, 4))
+    assert checkpoint_scorer(on_nominal, zero_action(on_nominal.num_actions))() != first
 
 
 def _mean_action(ppo: MultiHeadPPO):

@@ -185,6 +185,14 @@ def test_smoke_profile_trains_exports_and_validates(
     for name in ("report.md", "drift.png", "survival_per_start.png", "sim2sim.rrd"):
         assert (validate / name).stat().st_size > 0, name
     assert "| zero_action |" in (validate / "report.md").read_text()
+    # Every protocol beside nominal, the rule that chose the checkpoint, and the pictures, linked.
+    assert set(report["protocols"]) == {"nominal", "randomized", "other_physics"}
+    assert report["protocols"]["randomized"]["runs"] == 2  # the smoke profile's seeds
+    last = "the run's last checkpoint, fixed by iteration before looking"
+    assert report["checkpoint"] == {"iteration": 2, "rule": last}
+    assert report["pictures"] == {"filmstrip": "filmstrip.png", "video": "rollout.mp4"}
+    assert "![start-zero rollout beside its reference](filmstrip.png)" in markdown
+    assert f"Checkpoint: iteration 2, chosen by {last}." in markdown
     # policy.onnx: the same function as policy.pt on what the loop fed it, labelled like policy.json.
     assert report["runtime"]["onnx_vs_torchscript_max_abs_diff"] < 1e-5
     assert report["runtime"]["observations_compared"] == 2000
