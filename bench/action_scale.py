@@ -6,7 +6,9 @@
 
 Loads a checkpoint of the finished `train` artifact of that plan (its last one by default) and
 rolls out its mean outputs, multiplied by each scale, from `--starts` evenly spaced frames on the
-nominal training model (primitive collision, training terminations, no randomization). Scale 0 is
+training model as `train` scores checkpoints (primitive collision, training terminations, the
+randomized physics of `train.scoring_seed`; with `--starts` equal to `train.scoring_starts`, the
+same worlds, so scale 1 from frame 0 repeats the logged score). Scale 0 is
 zero output: under `selective` the residual joints track the reference and the rest hold the
 default pose. Where a smaller scale survives longer, the policy's own outputs end the rollout.
 `--joints` scales only the outputs of the policy joints matching those globs (the rest stay whole),
@@ -111,7 +113,7 @@ def _measure(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _runner(plan: workspace.Plan, starts: int) -> TrainingRunner:
-    """The training's runner, whose nominal scoring environment has one world per start."""
+    """The training's runner, whose scoring environment has one world per start."""
     config = dataclasses.replace(plan.pipeline.params["train"], scoring_starts=starts)
     reference = workspace.reference(plan)
     with np.load(workspace.required_artifact(plan, "prior") / PRIOR_FILE) as prior:
@@ -170,7 +172,7 @@ def _table(result: dict[str, Any]) -> str:
     noise = " + noise" if result["noise_draws"] else ""
     lines = [
         f"# {result['robot']} {result['motion']} {result['clip']} s, checkpoint {result['checkpoint']} "
-        f"(train {result['train_key']}): seconds survived per start on the nominal training model",
+        f"(train {result['train_key']}): seconds survived per start on the training model (scoring physics)",
         "",
         f"Scaled outputs: {', '.join(result['scaled_joints'])}.",
         "",

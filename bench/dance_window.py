@@ -198,6 +198,9 @@ def _result(plan: workspace.Plan, clip: str, commit: str) -> dict[str, Any]:
             if "start_zero_s" in row
         ],
         "exported_checkpoint": json.loads((export / MANIFEST).read_text())["metrics"]["checkpoint_iteration"],
+        "checkpoint_rule": validation.checkpoint_rule,
+        "protocols": validation.protocols,
+        "tracked_pct": validation.tracked_pct,
         "completion_pct": validation.completion_pct,
         "E_g_mpbpe": validation.E_g_mpbpe,
         "options": {name: _lookup(params, path) for name, path in OPTIONS.items()},

@@ -12,7 +12,7 @@ from conftest import PROJECT, cli
 from rd_pipeline.api.sweeps import SHARED_UNTIL, Trial, run_sweep, shared_upstream_args, validation_report
 
 FAST = ("train.iterations=1", "train.clip=0:4")
-"""One PPO iteration on 4 s of motion: 4 validation starts per trial."""
+"""One PPO iteration on 4 s of motion: one validation start per trial (the smoke grid is 5 s)."""
 
 
 @pytest.mark.slow
