@@ -88,6 +88,9 @@ def _measure(args: argparse.Namespace) -> dict[str, Any]:
     env = runner.scoring_env
     assert env is not None
     fresh = env.state_dict()
+    # Worlds that end respawn where the sampler says and draw pushes from the environment's
+    # generator: the sampler starts over too, or one scale's rollouts would move the next's.
+    fresh_sampler = env.sampler.state_dict()
     starts = scoring_starts(env.max_episode_length, env.num_envs)
     draws = list(range(args.noise_draws)) or [None]
     survival_s = {}
@@ -95,6 +98,7 @@ def _measure(args: argparse.Namespace) -> dict[str, Any]:
         seconds = []
         for draw in draws:
             env.load_state_dict(fresh)
+            env.sampler.load_state_dict(fresh_sampler)
             seconds.append(_survival(runner, starts, scale, scaled, draw).numpy())
         survival_s[str(scale)] = [round(float(value), 2) for value in np.median(seconds, axis=0)]
     return {

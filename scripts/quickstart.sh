@@ -37,6 +37,16 @@ if [ -z "${SKIP_INSTALL:-}" ]; then
   .venv/bin/pip install --quiet torch==2.13.0
   # setuptools notes on every mapped editable install that its finder is in use; that is by design here.
   PYTHONWARNINGS=ignore::UserWarning .venv/bin/pip install --quiet -e ".[${EXTRAS:-dev}]"
+  # `validate` renders its filmstrip and video with MuJoCo offscreen: EGL, else OSMesa (Mesa's
+  # software renderers need no GPU). Without either it still validates and says why it drew nothing.
+  if ! ldconfig -p 2>/dev/null | grep -q -E "libEGL\.so\.1|libOSMesa\.so"; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+      echo "quickstart: installing Mesa's EGL for headless rendering (libegl1, libgl1-mesa-dri)"
+      apt-get install -y -qq libegl1 libgl1-mesa-dri >/dev/null || echo "quickstart: could not install libegl1; validation will draw no pictures"
+    else
+      echo "quickstart: no EGL or OSMesa library found; install libegl1 (or libosmesa6) for validation's pictures"
+    fi
+  fi
 fi
 
 if [ -z "${SKIP_RUN:-}" ]; then

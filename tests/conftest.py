@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 PROJECT = Path(__file__).resolve().parent.parent
@@ -133,3 +134,12 @@ def h1_2_dance_job(config, work: Path, checkpoint: Path | None = None):
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)
     segments = Segments(starts, lengths, np.zeros(len(starts)))
     return TrainingJob(load_robot("h1_2"), reference, segments, config, work, checkpoint)
+
+
+def video_frames(path: Path) -> list[np.ndarray]:
+    """The (height, width, 3) frames of an MP4, decoded by the ffmpeg that encoded it."""
+    import imageio_ffmpeg
+
+    reader = imageio_ffmpeg.read_frames(str(path))
+    width, height = next(reader)["size"]
+    return [np.frombuffer(frame, np.uint8).reshape(height, width, 3) for frame in reader]

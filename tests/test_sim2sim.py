@@ -6,11 +6,10 @@ from __future__ import annotations
 import dataclasses
 from typing import NamedTuple
 
-import imageio_ffmpeg
 import mujoco
 import numpy as np
 import pytest
-from conftest import RETARGETED_DIR
+from conftest import RETARGETED_DIR, video_frames
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.deploy import reference_baseline_spec
@@ -172,9 +171,7 @@ def test_the_pictures_show_the_rollout_moving_beside_its_reference(standing: Sta
     pictures = render_pictures(standing.model, scene, look, tmp_path)
     assert pictures == {"filmstrip": "filmstrip.png", "video": "rollout.mp4"}, pictures
     assert sorted(p.name for p in tmp_path.iterdir()) == ["filmstrip.png", "rollout.mp4"]
-    reader = imageio_ffmpeg.read_frames(str(tmp_path / "rollout.mp4"))
-    size = next(reader)["size"]
-    video = [np.frombuffer(f, np.uint8).reshape(size[1], size[0], 3) for f in reader]
+    video = video_frames(tmp_path / "rollout.mp4")
     # Up to the rollout's end plus a second, at 10 frames a second, capped at 2 s.
     assert len(video) == min(20, -(-(rollout.steps + 51) // 5))
     assert all(frame.std() > 10 for frame in video)  # not blank
