@@ -143,7 +143,8 @@ def _definitions(report: dict) -> list[str]:
         "that reach the clip's end, mean survival their mean seconds survived.",
         "- failure: pelvis tilted past the orientation limit, a termination body beyond the motion-far "
         "distance from its reference, or a body other than the feet on the floor.",
-        "- tracked %: steps tracked (see above) over the steps the rollouts could have lasted.",
+        "- tracked %: per start, the steps tracked (see above) over the steps it could have lasted "
+        "(to the clip's end), averaged over the starts.",
         "- E_g_mpbpe / E_mpbpe: mean body position error in the world / relative to the pelvis (mm); "
         "E_mpjpe: mean joint position error (mrad); E_mpjve, E_mpbve: their velocities.",
         "- zero action: the reference fed straight to the PD controllers, the baseline every figure stands beside.",
