@@ -54,9 +54,15 @@ def test_csv_has_the_dataset_layout(artifacts: Path, tmp_path: Path) -> None:
     assert np.linalg.norm(written[:, 3:7], axis=1) == pytest.approx(1.0)
 
 
-def test_a_bad_rate_is_one_line(artifacts: Path, tmp_path: Path) -> None:
-    result = cli("export-motion", "--robot", "h1", "--motion", "dance2_subject3", "--fps", "0", "--out", "x.csv")
-    assert result.returncode == 2 and result.stderr.strip().endswith("error: --fps must be positive, got 0")
+@pytest.mark.parametrize("fps", ["0", "0.001", "1e9", "inf", "nan"])
+def test_a_bad_rate_is_one_line(artifacts: Path, tmp_path: Path, fps: str) -> None:
+    """0.001 fps wrote an empty file; 1e9 asked numpy for 1.64 TiB; inf overflowed."""
+    out = tmp_path / "x.csv"
+    result = cli("export-motion", "--robot", "h1", "--motion", "dance2_subject3", "--fps", fps, "--out", str(out))
+    shown = f"{float(fps):g}"
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [f"error: --fps must be from 1 to 1000 frames per second, got {shown}"]
+    assert not out.exists()
 
 
 @pytest.mark.parametrize("format", ["csv", "mjlab"])

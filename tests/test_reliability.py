@@ -66,7 +66,8 @@ def test_two_runs_of_one_key_started_together_both_succeed(artifacts: Path) -> N
     assert [line.split()[0] for line in stages] == ["parse", "retarget", "stats", "prior", "train"]
     assert stages[-1].split()[1] == "ran"  # the other run may have computed the upstream stages
     assert "iterations=4" in stages[-1]
-    assert summary[-1].startswith("note: smoke is a plumbing check: 2 PPO iterations train no policy")
+    # The note counts the iterations that ran, not the profile's 2.
+    assert summary[-1].startswith("note: smoke is a plumbing check: 4 PPO iterations train no policy")
 
 
 @pytest.mark.slow
@@ -347,3 +348,19 @@ def test_a_clip_beyond_the_motion_is_refused_before_any_stage(artifacts: Path) -
     )
     assert not artifacts.exists()
     assert cli("plan", "--clip", "125:200").returncode == 0  # clamped to the end by train, with a warning
+
+
+@pytest.mark.parametrize("given", ["absolute", "../relative"])
+def test_a_motion_given_as_a_path_is_refused_and_nothing_is_written(artifacts: Path, tmp_path: Path, given: str) -> None:
+    """`--motion /…/bvh/dance1_subject2` once wrote its parse artifact into the data folder."""
+    take = LAFAN_DIR / "dance1_subject2"
+    motion = str(take) if given == "absolute" else os.path.relpath(take, tmp_path)
+    before = sorted(LAFAN_DIR.iterdir())
+    result = cli("run", "--motion", motion, "--until", "parse", cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        f"error: motion '{motion}' is not a motion name: give a take's name such as dance1_subject2, "
+        "not a path (RD_LAFAN_DIR or RD_RETARGETED_DIR say where the files are)"
+    ]
+    assert sorted(LAFAN_DIR.iterdir()) == before
+    assert not artifacts.exists() or not any(artifacts.iterdir())

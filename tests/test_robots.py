@@ -187,3 +187,39 @@ def test_a_robot_the_toolkit_has_never_seen_is_a_config_and_a_model(
     theirs = retarget(excerpt, load_robot("h1"), RetargetConfig()).reference
     assert ours.joint_names == tuple(name.replace("_joint", "_hinge") for name in theirs.joint_names)
     assert np.array_equal(ours.joint_pos, theirs.joint_pos) and np.array_equal(ours.root_pos, theirs.root_pos)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "said"),
+    [
+        (
+            "residual_indices = [0, 3, 6, 9]",
+            'residual_indices = [0, "3", 6, 9]',
+            "joints.residual_indices must be a list of whole numbers, got '3' in it",
+        ),
+        (
+            "residual_indices = [0, 3, 6, 9]",
+            "residual_indices = [0, true, 6, 9]",
+            "joints.residual_indices must be a list of whole numbers, got True in it",
+        ),
+        (
+            '["left_knee_link", "right_knee_link"]',
+            '["left_knee_link", "right_knee_link", "pelvis"]',
+            "collision.pairs must hold pairs of two body names, got ['left_knee_link', 'right_knee_link', 'pelvis']",
+        ),
+        (
+            '"*_knee_joint" = 150.0',
+            '"*_knee_joint" = true',
+            'joints.kp."*_knee_joint" must be a finite number, got True',
+        ),
+        ('"*_knee_joint" = 150.0', '"*_knee_joint" = -150.0', 'joints.kp."*_knee_joint" must be positive, got -150.0'),
+        ('"*_knee_joint" = 5.0', '"*_knee_joint" = -5.0', 'joints.kd."*_knee_joint" must be non-negative, got -5.0'),
+        ('policy = "all"', 'policy = "some"', """joints.policy must be "all" or a list of names, got 'some'"""),
+    ],
+)
+def test_a_robot_toml_of_the_wrong_types_or_signs_is_one_line(tmp_path: Path, old: str, new: str, said: str) -> None:
+    """Each once loaded as something else (true as 1.0, "some" as the joints 's', 'o', ...) or raised."""
+    path = _broken_config(tmp_path, "g1", old, new)
+    with pytest.raises(PipelineError) as error:
+        load_robot_config("g1", path)
+    assert str(error.value) == f"{path}: {said}"

@@ -24,7 +24,7 @@ from rich.console import Console
 
 from rd_pipeline import paths
 from rd_pipeline.artifacts.runner import Pipeline, PlannedStage, StageOutcome, execute, stage_status
-from rd_pipeline.artifacts.sources import resolve_source
+from rd_pipeline.artifacts.sources import check_motion_name, resolve_source
 from rd_pipeline.artifacts.stage import Stage
 from rd_pipeline.artifacts.store import MANIFEST, ArtifactStore
 from rd_pipeline.errors import PipelineError
@@ -90,6 +90,7 @@ def plan(
     the motion's source; every value is checked now, also for stages that will not run."""
     if robot is not None:
         load_robot_config(robot)  # unknown robot: one clear line before anything else
+    check_motion_name(motion)
     names = [stage.name for stage in REGISTRY]
     # `seed` outranks the profile and the params file; a `stage.seed=` override outranks it.
     seeded = () if seed is None else tuple(f"{stage.name}.seed={seed}" for stage in REGISTRY if _has_seed(stage))

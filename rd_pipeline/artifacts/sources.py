@@ -3,12 +3,24 @@ retargeted to the robot)."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from rd_pipeline import paths
 from rd_pipeline.errors import PipelineError
 
 SOURCES = ("bvh", "csv")
+MOTION_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
+"""A take's file name without its extension: it names folders of the store, so never a path."""
+
+
+def check_motion_name(motion: str) -> None:
+    """Refuse a motion that is not a plain name (a path would place artifacts outside the store)."""
+    if not MOTION_NAME.fullmatch(motion) or ".." in motion:
+        raise PipelineError(
+            f"motion '{motion}' is not a motion name: give a take's name such as dance1_subject2, "
+            "not a path (RD_LAFAN_DIR or RD_RETARGETED_DIR say where the files are)"
+        )
 
 
 def resolve_source(robot: str | None, motion: str, forced: str | None) -> str:

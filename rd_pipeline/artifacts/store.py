@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from rd_pipeline.artifacts.sources import check_motion_name
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.files import file_sha256
 
@@ -73,6 +74,7 @@ class ArtifactStore:
 
     def folder(self, stage: str, robot: str | None, motion: str) -> Path:
         """The folder holding every key of one stage for one (robot, motion)."""
+        check_motion_name(motion)
         parts = [stage] + ([robot] if robot else []) + [motion]
         return self.root.joinpath(*parts)
 

@@ -179,6 +179,8 @@ def print_summary(plan: workspace.Plan, outcomes: list[StageOutcome], console: C
         console.print(escape(f"report: {report}"), highlight=False)
     note = profile_note(plan.profile)
     if note and any(outcome.name == "train" for outcome in outcomes):
+        # The note speaks of the run that was made, `--set train.iterations=` included.
+        note = note.replace("{iterations}", str(plan.pipeline.params["train"].iterations))
         console.print(f"[yellow]note:[/] {escape(note)}", highlight=False)
 
 
@@ -288,14 +290,20 @@ def view(cmd: View, console: Console) -> int:
     return 0
 
 
+EXPORT_FPS_RANGE = (1.0, 1000.0)
+"""Frame rates `export-motion` writes: under one frame a second a clip has no frames to speak of,
+and beyond a kilohertz (a physics rate) the file only grows (at 1e9 fps: terabytes)."""
+
+
 def export_motion(cmd: ExportMotion, console: Console) -> int:
     from rd_pipeline.export.motion_csv import write_dataset_csv
     from rd_pipeline.export.motion_mjlab import write_mjlab_npz
     from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
     from rd_pipeline.robots import load_robot
 
-    if cmd.fps is not None and not cmd.fps > 0:
-        raise PipelineError(f"--fps must be positive, got {cmd.fps:g}")
+    low, high = EXPORT_FPS_RANGE
+    if cmd.fps is not None and not low <= cmd.fps <= high:
+        raise PipelineError(f"--fps must be from {low:g} to {high:g} frames per second, got {cmd.fps:g}")
     planned = workspace.plan(cmd.robot, cmd.motion, cmd.profile, source=cmd.source)
     made_by = workspace.providing(planned, "reference")
     outcomes = workspace.run(planned, until=made_by, console=console)

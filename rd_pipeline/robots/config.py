@@ -105,11 +105,10 @@ def load_robot_config(name: str, path: Path | None = None) -> RobotConfig:
     except tomllib.TOMLDecodeError as exc:
         raise PipelineError(f"{path}: {exc}") from None
     reader = _Fields(raw, path)
-    joints = tuple(reader.get("joints.order", list))
-    policy = reader.get("joints.policy", (str, list))
-    policy_joints = joints if policy == "all" else tuple(policy)
-    csv_joints = reader.get("dataset.csv_joints", (str, list))
-    feet = reader.get("bodies.feet", list)
+    joints = reader.names("joints.order")
+    policy_joints = reader.names("joints.policy", everything="all", whole=joints)
+    csv_joints = reader.names("dataset.csv_joints", everything="order", whole=joints)
+    feet = reader.names("bodies.feet")
     if len(feet) != 2:
         raise PipelineError(f"{path}: bodies.feet must name 2 bodies (left, right), got {len(feet)}")
     config = RobotConfig(
@@ -120,21 +119,21 @@ def load_robot_config(name: str, path: Path | None = None) -> RobotConfig:
         urdf=reader.get("asset.urdf", str),
         joint_names=joints,
         policy_joints=policy_joints,
-        residual_indices=tuple(reader.get("joints.residual_indices", list)),
-        kp=reader.per_joint("joints.kp", joints),
-        kd=reader.per_joint("joints.kd", joints),
-        effort_limit=reader.per_joint("joints.effort_limit", joints),
-        velocity_limit=reader.per_joint("joints.velocity_limit", joints),
+        residual_indices=reader.indices("joints.residual_indices"),
+        kp=reader.per_joint("joints.kp", joints, "positive"),
+        kd=reader.per_joint("joints.kd", joints, "non-negative"),
+        effort_limit=reader.per_joint("joints.effort_limit", joints, "positive"),
+        velocity_limit=reader.per_joint("joints.velocity_limit", joints, "positive"),
         default_pos=reader.per_joint("joints.default_pos", joints),
         retarget_range=reader.joint_bounds("joints.retarget_range", joints),
         root_body=reader.get("bodies.root", str),
         foot_bodies=(feet[0], feet[1]),
-        tracking_bodies=tuple(reader.get("bodies.tracking", list)),
-        keypoint_bodies=tuple(reader.get("bodies.keypoints", list)),
-        termination_bodies=tuple(reader.get("bodies.termination", list)),
+        tracking_bodies=reader.names("bodies.tracking"),
+        keypoint_bodies=reader.names("bodies.keypoints"),
+        termination_bodies=reader.names("bodies.termination"),
         retarget_map=dict(reader.get("bodies.retarget", dict)),
-        csv_joints=joints if csv_joints == "order" else tuple(csv_joints),
-        collision_pairs=tuple((a, b) for a, b in reader.get("collision.pairs", list)),
+        csv_joints=csv_joints,
+        collision_pairs=reader.pairs("collision.pairs"),
     )
     if config.name != name:
         raise PipelineError(f"{path}: name is '{config.name}' but the file is for robot '{name}'")
@@ -180,7 +179,36 @@ class _Fields:
             raise PipelineError(f"{self.path}: field '{dotted}' has the wrong type ({type(node).__name__})")
         return node
 
-    def per_joint(self, dotted: str, joints: tuple[str, ...]) -> np.ndarray:
+    def names(self, dotted: str, everything: str | None = None, whole: tuple[str, ...] = ()) -> tuple[str, ...]:
+        """A list of names, or the word `everything` (such as "all") for the `whole` list."""
+        node = self.get(dotted, (list, str) if everything else list)
+        if everything is not None and node == everything:
+            return whole
+        if isinstance(node, str) or not all(isinstance(name, str) for name in node):
+            wanted = f'"{everything}" or a list of names' if everything else "a list of names"
+            raise PipelineError(f"{self.path}: {dotted} must be {wanted}, got {node!r}")
+        return tuple(node)
+
+    def indices(self, dotted: str) -> tuple[int, ...]:
+        """A list of whole numbers (TOML's true is not one)."""
+        node = self.get(dotted, list)
+        for value in node:
+            if not isinstance(value, int) or isinstance(value, bool):
+                raise PipelineError(f"{self.path}: {dotted} must be a list of whole numbers, got {value!r} in it")
+        return tuple(node)
+
+    def pairs(self, dotted: str) -> tuple[tuple[str, str], ...]:
+        """A list of [name, name] pairs."""
+        out = []
+        for pair in self.get(dotted, list):
+            if not isinstance(pair, list) or len(pair) != 2 or not all(isinstance(name, str) for name in pair):
+                raise PipelineError(f"{self.path}: {dotted} must hold pairs of two body names, got {pair!r}")
+            out.append((pair[0], pair[1]))
+        return tuple(out)
+
+    def per_joint(self, dotted: str, joints: tuple[str, ...], sign: str | None = None) -> np.ndarray:
+        """Per joint, the value of the first pattern that matches it; `sign` ("positive",
+        "non-negative") where a gain or a limit of the other sign means nothing."""
         patterns: dict = self.get(dotted, dict)
         values = np.empty(len(joints))
         for i, joint in enumerate(joints):
@@ -188,8 +216,10 @@ class _Fields:
             if match is None:
                 raise PipelineError(f"{self.path}: {dotted} has no pattern matching joint '{joint}'")
             value = patterns[match]
-            if not isinstance(value, (int, float)) or not np.isfinite(value):
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or not np.isfinite(value):
                 raise PipelineError(f'{self.path}: {dotted}."{match}" must be a finite number, got {value!r}')
+            if (sign == "positive" and value <= 0) or (sign == "non-negative" and value < 0):
+                raise PipelineError(f'{self.path}: {dotted}."{match}" must be {sign}, got {value!r}')
             values[i] = float(value)
         values.setflags(write=False)
         return values
