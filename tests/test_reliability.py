@@ -351,7 +351,9 @@ def test_a_clip_beyond_the_motion_is_refused_before_any_stage(artifacts: Path) -
 
 
 @pytest.mark.parametrize("given", ["absolute", "../relative"])
-def test_a_motion_given_as_a_path_is_refused_and_nothing_is_written(artifacts: Path, tmp_path: Path, given: str) -> None:
+def test_a_motion_given_as_a_path_is_refused_and_nothing_is_written(
+    artifacts: Path, tmp_path: Path, given: str
+) -> None:
     """`--motion /…/bvh/dance1_subject2` once wrote its parse artifact into the data folder."""
     take = LAFAN_DIR / "dance1_subject2"
     motion = str(take) if given == "absolute" else os.path.relpath(take, tmp_path)
