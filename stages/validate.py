@@ -31,6 +31,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         title = f"{ctx.robot} {ctx.motion}, policy {exported.key}, nominal start-zero rollout"
         scene = rollout_scene(validation, clip, title)
         report["pictures"] = render_pictures(validation.model, scene, config.render, ctx.out_dir)
+    report["recording"] = RECORDING_FILE  # written below, after the report that links it
     write_json(report, ctx.out_dir)
     write_markdown(report, ctx.out_dir)
     plot_report(report, ctx.out_dir)

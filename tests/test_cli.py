@@ -216,6 +216,7 @@ def test_misused_options_name_what_is_wrong(args: tuple[str, ...], message: str,
     assert not artifacts.exists()
 
 
+@pytest.mark.slow  # trains and validates a window: an end-to-end run
 def test_window_trains_on_the_stretch_the_reference_speed_chooses(artifacts: Path) -> None:
     """H1-2 dance2_subject4 (225.7 s of dataset CSV): its typical ten seconds and its busiest,
     read from the imported reference; the plan is the one `--clip` gives for the same seconds."""

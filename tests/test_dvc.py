@@ -25,6 +25,7 @@ def test_dvc_stages_are_the_registry() -> None:
         assert f"stages.{name}" in stage["params"]
 
 
+@pytest.mark.slow  # the whole smoke DAG through dvc: an end-to-end run
 def test_dvc_repro_runs_the_smoke_dag(tmp_path: Path) -> None:
     dvc = shutil.which("dvc", path=str(Path(sys.executable).parent)) or shutil.which("dvc")
     if dvc is None:

@@ -79,10 +79,9 @@ def _pictures(report: dict) -> list[str]:
         lines.append(f"Video: [{pictures['video']}]({pictures['video']}). ")
     elif pictures.get("skipped"):
         lines.append(f"No filmstrip or video: {pictures['skipped']}. ")
-    lines[-1] += (
-        f"Plots: [survival per start]({SURVIVAL_PLOT}), [drift]({DRIFT_PLOT}). "
-        f"Recording: [{RECORDING_FILE}]({RECORDING_FILE}) (`rerun {RECORDING_FILE}`)."
-    )
+    lines[-1] += f"Plots: [survival per start]({SURVIVAL_PLOT}), [drift]({DRIFT_PLOT})."
+    if report.get("recording"):
+        lines[-1] += f" Recording: [{report['recording']}]({report['recording']}) (`rerun {report['recording']}`)."
     return lines
 
 
