@@ -87,8 +87,9 @@ ConeName = Literal["pyramidal", "elliptic"]
 
 @dataclass(frozen=True)
 class OtherPhysics:
-    """Rollouts on physics other than training's: the same mesh model, another integrator,
-    friction cone and timestep (training: Euler, pyramidal cone, 500 Hz)."""
+    """Rollouts on physics other than training's: the same mesh model with another friction cone
+    and timestep (training: pyramidal cone, 500 Hz, and the MJCF's integrator, implicitfast on the
+    Unitree models), and the integrator named here."""
 
     enabled: bool = True
     """Off: no other-physics protocol."""

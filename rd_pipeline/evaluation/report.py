@@ -148,7 +148,8 @@ def _definitions(report: dict) -> list[str]:
         "E_mpjpe: mean joint position error (mrad); E_mpjve, E_mpbve: their velocities.",
         "- zero action: the reference fed straight to the PD controllers, the baseline every figure stands beside.",
         "- randomized: the paper's domain randomization and sensor noise, drawn per rollout from "
-        "validation's own seeds; other physics: the same model on another integrator, cone and timestep.",
+        "validation's own seeds; other physics: the same model on another friction cone and timestep "
+        "(its row names them and the integrator).",
     ]
 
 
