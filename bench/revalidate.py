@@ -19,10 +19,9 @@ from typing import Any
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.report import REPORT_MD, plot_report, write_json, write_markdown
-from rd_pipeline.evaluation.validation import load_exported_spec, reference_clip, rollout_scene, validate_policy
+from rd_pipeline.evaluation.validation import load_exported_spec, reference_clip, rollout_pictures, validate_policy
 from rd_pipeline.evaluation.validation_config import ValidationConfig
 from rd_pipeline.robots import load_robot
-from rd_pipeline.viz.render import render_pictures
 
 REFERENCE_STAGES = ("retarget", "import")
 
@@ -60,8 +59,7 @@ def revalidate(export: Path, out: Path, rule: str = "") -> None:
     report = validation.report.details
     if rule and not report["checkpoint"]:
         report["checkpoint"] = {"iteration": manifest["metrics"]["checkpoint_iteration"], "rule": rule}
-    title = f"{manifest['robot']} {manifest['motion']}, policy {manifest['key']}, nominal start-zero rollout"
-    report["pictures"] = render_pictures(validation.model, rollout_scene(validation, clip, title), config.render, out)
+    report["pictures"] = rollout_pictures(validation, clip, config.render, out)
     write_json(report, out)
     write_markdown(report, out)
     plot_report(report, out)

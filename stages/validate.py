@@ -12,10 +12,9 @@ from rd_pipeline.robots.assets import model_files
 
 def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.evaluation.report import CONTROLLERS, plot_report, write_json, write_markdown
-    from rd_pipeline.evaluation.validation import load_exported_spec, reference_clip, rollout_scene, validate_policy
+    from rd_pipeline.evaluation.validation import load_exported_spec, reference_clip, rollout_pictures, validate_policy
     from rd_pipeline.robots import load_robot
     from rd_pipeline.viz.recording import TRACKED_FILE, record_tracking, save_tracked
-    from rd_pipeline.viz.render import render_pictures
 
     config: ValidationConfig = ctx.params
     exported = ctx.upstream["deployable_policy"]
@@ -28,9 +27,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
         validation = validate_policy(robot, ctx.motion, exported.path, exported.key, clip, config, advance)
     report = validation.report.details
     if config.render.enabled:
-        title = f"{ctx.robot} {ctx.motion}, policy {exported.key}, nominal start-zero rollout"
-        scene = rollout_scene(validation, clip, title)
-        report["pictures"] = render_pictures(validation.model, scene, config.render, ctx.out_dir)
+        report["pictures"] = rollout_pictures(validation, clip, config.render, ctx.out_dir)
     report["recording"] = RECORDING_FILE  # written below, after the report that links it
     write_json(report, ctx.out_dir)
     write_markdown(report, ctx.out_dir)

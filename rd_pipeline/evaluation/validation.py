@@ -21,7 +21,7 @@ from rd_pipeline.evaluation.metrics import drift, per_second, summarize, t_inter
 from rd_pipeline.evaluation.protocol import Protocol
 from rd_pipeline.evaluation.report import CONTROLLERS
 from rd_pipeline.evaluation.sim2sim import BodySets, Rollout, reference_states, run_rollouts
-from rd_pipeline.evaluation.validation_config import ValidationConfig
+from rd_pipeline.evaluation.validation_config import RenderConfig, ValidationConfig
 from rd_pipeline.evaluation.validation_report import ValidationReport
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.policy_runtime import Policy, load_runtimes
@@ -29,7 +29,7 @@ from rd_pipeline.policy_spec import SPEC_FILE, PolicySpec, load_policy_spec
 from rd_pipeline.rl.sim_model import pd_simulation_model
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.assets import asset_path
-from rd_pipeline.viz.render import Scene
+from rd_pipeline.viz.render import Scene, render_pictures
 
 
 @dataclass(frozen=True)
@@ -59,7 +59,15 @@ class Validation:
     root_body: str
 
 
-def rollout_scene(validation: Validation, clip: ReferenceClip, title: str) -> Scene:
+def rollout_pictures(validation: Validation, clip: ReferenceClip, look: RenderConfig, out_dir: Path) -> dict[str, str]:
+    """Render the policy's nominal start-zero rollout beside its reference into `out_dir` (see
+    `render_pictures`); the report's `pictures` entry."""
+    details = validation.report.details
+    title = f"{details['robot']} {details['motion']}, policy {details['policy_key']}, nominal start-zero rollout"
+    return render_pictures(validation.model, _rollout_scene(validation, clip, title), look, out_dir)
+
+
+def _rollout_scene(validation: Validation, clip: ReferenceClip, title: str) -> Scene:
     """The pictures' scene: the policy's nominal start-zero rollout and its reference."""
     tracked = validation.tracked
     assert tracked.qpos is not None  # the first rollout keeps its poses
