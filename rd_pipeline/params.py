@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import difflib
 import math
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from rd_pipeline.errors import PipelineError
+from rd_pipeline.errors import PipelineError, nearest
 from rd_pipeline.profiles import load_profile
 
 DEFAULT_PROFILE = "smoke"
@@ -74,12 +75,21 @@ def read_params_file(path: Path, stage_names: list[str]) -> tuple[str | None, di
         raise PipelineError(f"{path}: cannot read params file ({str(exc).splitlines()[0]})") from None
     if not isinstance(raw, dict):
         raise PipelineError(f"{path}: a params file is a mapping with a 'stages:' table, not a {type(raw).__name__}")
-    stages = raw.get("stages") or {}
+    if "stages" not in raw:
+        close = difflib.get_close_matches("stages", [str(key) for key in raw], n=1)
+        spelled = f" ('{close[0]}' is spelled like it)" if close else ""
+        raise PipelineError(
+            f"{path}: a params file sets params under a 'stages:' table, and this one has none{spelled}"
+        )
+    stages = raw["stages"] or {}
     if not isinstance(stages, dict):
         raise PipelineError(f"{path}: 'stages' must be a mapping of stage name to params")
     for name, values in stages.items():
         if name not in stage_names:
-            raise PipelineError(f"{path}: stages.{name} is not a stage (stages: {', '.join(stage_names)})")
+            known = ", ".join(stage_names)
+            raise PipelineError(
+                f"{path}: stages.{name} is not a stage{nearest(str(name), stage_names)} (stages: {known})"
+            )
         if not isinstance(values, dict):
             raise PipelineError(f"{path}: stages.{name} must be a mapping of params")
     return raw.get("profile"), stages

@@ -7,7 +7,7 @@ import tomllib
 from pathlib import Path
 
 from rd_pipeline import robot_configs  # type: ignore[attr-defined]  # mapped from robots/ by setuptools
-from rd_pipeline.errors import PipelineError
+from rd_pipeline.errors import PipelineError, nearest
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 """The checkout holding the package (in an installed copy: site-packages). Data paths are relative
@@ -32,34 +32,55 @@ def settings_file() -> Path | None:
     return None
 
 
+DATA_KEYS = ("lafan_dir", "retargeted_dir", "robot_assets", "robot_configs", "artifacts")
+"""The keys of the settings file's one table, `[data]`."""
+
+
 def _data_settings(path: Path) -> dict[str, str]:
     try:
-        data = tomllib.loads(path.read_text()).get("data", {})
+        settings = tomllib.loads(path.read_text())
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise PipelineError(f"{path}: cannot be read ({exc})") from None
+    for name in settings:
+        if name != "data":
+            raise PipelineError(f"{path}: unknown table [{name}]{nearest(name, ['data'])}; the file has one, [data]")
+    data = settings.get("data", {})
     if not isinstance(data, dict) or not all(isinstance(v, str) for v in data.values()):
         raise PipelineError(f"{path}: [data] must map names to folder paths")
+    for key in data:
+        if key not in DATA_KEYS:
+            raise PipelineError(
+                f"{path}: unknown key '{key}' in [data]{nearest(key, DATA_KEYS)} (keys: {', '.join(DATA_KEYS)})"
+            )
     return data
 
 
-def _folder(variable: str, key: str, default: str | None) -> Path | None:
+def _folder(variable: str, key: str, default: str | None, existing: bool = True) -> Path | None:
     """`variable` when set, else `key` of the settings file (relative to it), else `default` beside
-    the settings file or, without one, in the working directory."""
+    the settings file or, without one, in the working directory. A folder the variable or the key
+    names must exist (unless not `existing`: one about to be made)."""
     value = os.environ.get(variable)
     if value:
-        return Path(value).expanduser().resolve()
+        path = Path(value).expanduser().resolve()
+        if existing and not path.is_dir():
+            raise PipelineError(f"{variable}={value}: no such folder")
+        return path
     settings = settings_file()
     base = settings.parent if settings else Path.cwd()
     if settings is not None:
         data = _data_settings(settings)
         if key in data:
-            return (base / Path(data[key]).expanduser()).resolve()
+            path = (base / Path(data[key]).expanduser()).resolve()
+            if existing and not path.is_dir():
+                raise PipelineError(f'{settings}: [data] {key} = "{data[key]}" names {path}, which is not a folder')
+            return path
     return None if default is None else base / default
 
 
-def lafan_dir() -> Path:
-    """Folder of raw LAFAN1 BVH files (`RD_LAFAN_DIR`, else `lafan_dir` of `rd-pipeline.toml`, else `raw_lafan/`)."""
-    return _folder("RD_LAFAN_DIR", "lafan_dir", "raw_lafan")  # type: ignore[return-value]
+def lafan_dir(existing: bool = True) -> Path:
+    """Folder of raw LAFAN1 BVH files (`RD_LAFAN_DIR`, else `lafan_dir` of `rd-pipeline.toml`, else
+    `raw_lafan/`); not `existing`: where `fetch-lafan` is to put them."""
+    return _folder("RD_LAFAN_DIR", "lafan_dir", "raw_lafan", existing)  # type: ignore[return-value]
 
 
 def retargeted_dir() -> Path | None:
@@ -83,7 +104,7 @@ def robot_configs_dir() -> Path | None:
 def artifacts_dir() -> Path:
     """Root of the content-addressed artifact store (`RD_ARTIFACTS`, else `artifacts` of
     `rd-pipeline.toml`, else `artifacts/`)."""
-    return _folder("RD_ARTIFACTS", "artifacts", "artifacts")  # type: ignore[return-value]
+    return _folder("RD_ARTIFACTS", "artifacts", "artifacts", existing=False)  # type: ignore[return-value]
 
 
 def bvh_path(motion: str) -> Path:

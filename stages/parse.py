@@ -12,7 +12,7 @@ from rd_pipeline import paths
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion import too_short
-from rd_pipeline.motion.lafan import LAFAN_CM_TO_M
+from rd_pipeline.motion.lafan import LAFAN_CM_TO_M, missing_lafan_joints
 from rd_pipeline.params import require_positive
 
 
@@ -36,6 +36,11 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.motion.human import HUMAN_MOTION_FILE, LAFAN_TO_Z_UP, human_motion_from_bvh
 
     clip = read_bvh(ctx.inputs["bvh"])
+    missing = missing_lafan_joints(clip.names)
+    if missing:
+        raise PipelineError(
+            f"{ctx.inputs['bvh']}: not a LAFAN1 skeleton; it lacks the joints {', '.join(missing)}"
+        )
     short = too_short(str(ctx.inputs["bvh"]), clip.channels.shape[0], 1.0 / clip.frame_time)
     if short:
         raise PipelineError(short)

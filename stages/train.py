@@ -86,9 +86,11 @@ def _train(ctx: StageContext, job: TrainingJob) -> TrainingOutcome:
 
 def _into_artifact(work: Path, out_dir: Path) -> list[dict]:
     """Move the work folder's checkpoints and log into the artifact; the log's rows."""
-    from rd_pipeline.rl.training_log import read_training_log
+    from rd_pipeline.rl.training_log import SEAL_DIR, read_training_log
 
     rows = read_training_log(work)
+    # The seals guard an interrupted run; the artifact's manifest hashes its files.
+    shutil.rmtree(work / SEAL_DIR, ignore_errors=True)
     if work != out_dir:
         for item in work.iterdir():
             shutil.move(str(item), out_dir / item.name)
@@ -117,6 +119,18 @@ def _longest_shorter_run(runs: tuple[ArtifactRef, ...], iterations: int) -> Shor
     return ShorterRun(run.key, run.path, run.manifest["params"]["iterations"])
 
 
+def _kept_progress(work: Path) -> tuple[bool, str]:
+    """The checkpoint an interrupted training kept that a rerun continues from, if any."""
+    from rd_pipeline.rl.training_log import intact_checkpoints
+
+    intact, damaged = intact_checkpoints(work)
+    broken = "; ".join(f"{path.name}: {problem}" for path, problem in damaged.items())
+    if intact is None:
+        return False, f"no checkpoint in {work} can be continued ({broken}); `--force` starts over"
+    also = f" ({broken})" if broken else ""
+    return True, f"an interrupted run kept {intact.name} in {work}{also}; `run` continues from it"
+
+
 STAGE = Stage(
     name="train",
     version=7,
@@ -128,4 +142,5 @@ STAGE = Stage(
     requires=("reference", "sampling_prior"),
     headline=("iterations", "best_checkpoint", "best_start_zero_s", "samples_per_s_median"),
     extends=("iterations",),
+    kept_progress=_kept_progress,
 )

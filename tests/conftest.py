@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -92,6 +93,21 @@ def cli(*args: str, env: dict[str, str] | None = None, cwd: Path | None = None) 
         env={**os.environ, **(env or {})},
         cwd=cwd or PROJECT,
         timeout=600,
+    )
+
+
+def start_cli(*args: str) -> subprocess.Popen:
+    """`rd-pipeline` in the background, stderr piped, as a user's terminal starts it: a shell that
+    started pytest in the background ignores SIGINT and children inherit that, so the child gets
+    the default disposition back (Python then raises KeyboardInterrupt)."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "rd_pipeline", *args],
+        cwd=PROJECT,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=os.environ.copy(),
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
 
 

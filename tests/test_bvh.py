@@ -12,31 +12,7 @@ from scipy.spatial.transform import Rotation
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.bvh import forward_kinematics, read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh
-
-LAFAN_JOINTS = [
-    "Hips",
-    "LeftUpLeg",
-    "LeftLeg",
-    "LeftFoot",
-    "LeftToe",
-    "RightUpLeg",
-    "RightLeg",
-    "RightFoot",
-    "RightToe",
-    "Spine",
-    "Spine1",
-    "Spine2",
-    "Neck",
-    "Head",
-    "LeftShoulder",
-    "LeftArm",
-    "LeftForeArm",
-    "LeftHand",
-    "RightShoulder",
-    "RightArm",
-    "RightForeArm",
-    "RightHand",
-]
+from rd_pipeline.motion.lafan import LAFAN_JOINTS
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +23,7 @@ def dance() -> Path:
 def test_lafan_dance_hierarchy_and_frames(dance: Path) -> None:
     clip = read_bvh(dance)
     joints = [n for n in clip.names if not n.endswith("_end")]
-    assert joints == LAFAN_JOINTS
+    assert tuple(joints) == LAFAN_JOINTS
     assert len(clip.names) - len(joints) == 5  # End Sites of toes, head and hands
     assert clip.channels.shape == (3945, 69)
     assert clip.frame_time == pytest.approx(0.033333)

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import PROJECT, cli
+from conftest import PROJECT, cli, start_cli
 
 from rd_pipeline import paths
 from rd_pipeline.artifacts.keys import artifact_key
@@ -197,28 +197,7 @@ def test_killed_stage_leaves_no_artifact(artifacts: Path) -> None:
 def test_interrupt_removes_the_partial_artifact(artifacts: Path) -> None:
     # Retargeting runs for seconds, so the interrupt lands inside the stage's work, not after it.
     folder = artifacts / "retarget" / "g1" / "dance1_subject1"
-    process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "rd_pipeline",
-            "run",
-            "--robot",
-            "g1",
-            "--motion",
-            "dance1_subject1",
-            "--until",
-            "retarget",
-        ],
-        cwd=PROJECT,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=os.environ.copy(),
-        # A shell that started us in the background ignores SIGINT, and children inherit that; a user's
-        # terminal does not, so give the child the default disposition (Python then raises KeyboardInterrupt).
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )
+    process = start_cli("run", "--robot", "g1", "--motion", "dance1_subject1", "--until", "retarget")
     deadline = time.time() + 120
     while not list(folder.glob(".tmp-*")) and time.time() < deadline:
         time.sleep(0.02)

@@ -9,6 +9,7 @@ worker must see the same artifact folder (`RD_ARTIFACTS` on a shared file system
 
 from __future__ import annotations
 
+import importlib.util
 import itertools
 import json
 import os
@@ -23,6 +24,7 @@ from pathlib import Path
 from rd_pipeline import paths
 from rd_pipeline.api import workspace
 from rd_pipeline.artifacts.keys import artifact_key
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.validation_report import ValidationReport
 
 EXECUTORS = ("local", "ray")
@@ -136,6 +138,14 @@ def shared_upstream_args(trials: list[Trial], profile: str | None) -> list[str]:
     args += ["--profile", profile] if profile else []
     args += ["--set", *common] if common else []
     return args
+
+
+def require_executor(executor: str) -> None:
+    """Refuse an executor that does not exist or cannot be loaded, before any work."""
+    if executor not in EXECUTORS:
+        raise PipelineError(f"executor must be {' or '.join(EXECUTORS)}, got '{executor}'")
+    if executor == "ray" and importlib.util.find_spec("ray") is None:
+        raise PipelineError("--executor ray: ray is not installed; `pip install -e '.[ray]'` adds it")
 
 
 def run_sweep(

@@ -19,7 +19,7 @@ from rd_pipeline.artifacts.keys import artifact_key, canonical_json
 from rd_pipeline.artifacts.stage import Stage, StageContext, build_params
 from rd_pipeline.artifacts.store import ArtifactRef, ArtifactStore, file_records, write_manifest
 from rd_pipeline.errors import Interrupted, PipelineError
-from rd_pipeline.files import file_sha256
+from rd_pipeline.files import failed_write, file_sha256, folder_bytes, write_failure
 from rd_pipeline.lazy import load_deferred
 
 
@@ -293,9 +293,15 @@ def _run_stage(
         load_deferred()
         try:
             metrics = stage.run(context)
+            seconds = time.perf_counter() - began
+            write_manifest(out, _manifest(entry, robot, pipeline.motion, seconds, metrics, out))
         except KeyboardInterrupt:
             raise _interrupted(context, stage.name) from None
-        write_manifest(out, _manifest(entry, robot, pipeline.motion, time.perf_counter() - began, metrics, out))
+        except Exception as exc:
+            refused = _refused_write(exc, context)
+            if refused is None:
+                raise
+            raise refused from None
     return ArtifactRef(stage.name, entry.key, store.folder(stage.name, robot, pipeline.motion) / entry.key)
 
 
@@ -317,6 +323,16 @@ def _manifest(
         "metrics": metrics,
         "files": file_records(out),
     }
+
+
+def _refused_write(exc: Exception, context: StageContext) -> PipelineError | None:
+    """A write the disk refused (full, read-only) as one line naming the folder and the space the
+    stage had used; None for any other failure."""
+    cause = failed_write(exc)
+    if cause is None:
+        return None
+    folders = [context.out_dir, *([context.work_dir] if context.work_dir else [])]
+    return write_failure(cause, context.out_dir.parent, folder_bytes(*folders))
 
 
 def _interrupted(context: StageContext, stage: str) -> KeyboardInterrupt:
@@ -388,14 +404,18 @@ def stage_status(pipeline: Pipeline, store: ArtifactStore, verify: bool = False)
         damage = found.damage(verify) if found else None
         others = [k for k in store.keys(stage.name, robot, pipeline.motion) if k != entry.key]
         work = store.work_folder(stage.name, robot, pipeline.motion, entry.key)
-        kept = not found and work.is_dir() and any(work.iterdir())
-        state = (
-            "damaged" if damage else "cached" if found else "resumable" if kept else "stale" if others else "missing"
-        )
+        running = not found and store.running(stage.name, robot, pipeline.motion, entry.key)
+        kept = not found and not running and work.is_dir() and any(work.iterdir())
+        continues, progress = stage.kept_progress(work) if kept else (False, "")
+        damage = damage or (progress if kept and not continues else None)
+        states = (("damaged", damage), ("cached", found), ("running", running), ("resumable", kept), ("stale", others))
+        state = next((name for name, holds in states if holds), "missing")
         path = store.folder(stage.name, robot, pipeline.motion) / entry.key
         rows.append({**row, "key": entry.key, "path": str(path), "state": state, "other_keys": others})
         if damage:
             rows[-1]["reason"] = damage
-        if kept:
-            rows[-1]["reason"] = f"an interrupted run kept its progress in {work}; `run` continues from it"
+        elif kept:
+            rows[-1]["reason"] = progress
+        elif running:
+            rows[-1]["reason"] = "another run is computing it now"
     return rows

@@ -21,7 +21,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from rd_pipeline.artifacts.store import ArtifactRef
-from rd_pipeline.errors import PipelineError
+from rd_pipeline.errors import PipelineError, nearest
 from rd_pipeline.params import ParamRangeError, require_default_sign
 
 T = TypeVar("T")
@@ -138,6 +138,12 @@ class Stage:
     """Manifest metrics shown in the summary at the end of a run."""
     report: str | None = None
     """A file of the artifact people read first (shown at the end of a run)."""
+    kept_progress: Callable[[Path], tuple[bool, str]] = lambda work: (
+        True,
+        f"an interrupted run kept its progress in {work}; `run` continues from it",
+    )
+    """For `status`, given the work folder an interrupted run left: whether a rerun continues
+    from it, and one line saying what it holds (or what is wrong with it)."""
     extends: tuple[str, ...] = ()
     """Params a run may grow (training iterations): with `--resume` it may continue from a finished
     artifact of this stage that differs from it only in these (`StageContext.shorter`)."""
@@ -173,7 +179,8 @@ def _override(defaults: Any, values: dict[str, Any], prefix: str) -> Any:
     changes = {}
     for name in [*flat, *nested]:
         if name not in known:
-            raise PipelineError(f"unknown parameter '{prefix}.{name}' (known: {', '.join(known) or 'none'})")
+            hint = nearest(name, known)
+            raise PipelineError(f"unknown parameter '{prefix}.{name}'{hint} (known: {', '.join(known) or 'none'})")
     hints = typing.get_type_hints(type(defaults))
     for name, value in flat.items():
         default = getattr(defaults, name)

@@ -159,6 +159,21 @@ class ArtifactStore:
             path.unlink(missing_ok=True)
             handle.close()
 
+    def running(self, stage: str, robot: str | None, motion: str, key: str) -> bool:
+        """Whether a run holds the key's lock now (a killed run's lock file is held by no one)."""
+        path = self.folder(stage, robot, motion) / f"{LOCK_PREFIX}{key}"
+        try:
+            handle = path.open("rb")
+        except OSError:
+            return False
+        with handle:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return True
+            fcntl.flock(handle, fcntl.LOCK_UN)
+        return False
+
     def _make_folder(self, folder: Path) -> None:
         try:
             folder.mkdir(parents=True, exist_ok=True)

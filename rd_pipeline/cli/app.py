@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -34,6 +35,7 @@ def main(argv: list[str] | None = None) -> int:
         return _reader_left()
     # Names, values and paths users give are printed literally: no emoji codes (`:100:`), no markup.
     console = Console(stderr=True, soft_wrap=True, emoji=False)
+    stopped_by = _stop_on_sigterm()
     try:
         return _dispatch(command, console)
     except PipelineError as exc:
@@ -42,14 +44,26 @@ def main(argv: list[str] | None = None) -> int:
     except ShareDone as exc:
         console.print(f"done: {escape(str(exc))}", highlight=False, soft_wrap=True)
         return 0
-    except Interrupted as exc:
-        console.print(f"[red]interrupted[/]: no partial artifact was kept; {escape(str(exc))}")
-        return 130
-    except KeyboardInterrupt:
-        console.print("[red]interrupted[/]: no partial artifact was kept")
-        return 130
+    except KeyboardInterrupt as exc:
+        kept = f"; {escape(str(exc))}" if isinstance(exc, Interrupted) else ""
+        by = "" if stopped_by[-1] == signal.SIGINT else f" by {stopped_by[-1].name}"
+        console.print(f"[red]interrupted[/]{by}: no partial artifact was kept{kept}")
+        return 128 + stopped_by[-1]
     except BrokenPipeError:  # `rd-pipeline robots | head`
         return _reader_left()
+
+
+def _stop_on_sigterm() -> list[signal.Signals]:
+    """Make SIGTERM (a supervisor, `kill`) stop a run as Ctrl-C does: the stage cleans up, keeps
+    its progress and says so. Returns the list the handler appends the signal that came to."""
+    stopped_by = [signal.SIGINT]
+
+    def stop(signum: int, frame: object) -> None:
+        stopped_by.append(signal.Signals(signum))
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, stop)
+    return stopped_by
 
 
 def _reader_left() -> int:

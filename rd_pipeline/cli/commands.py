@@ -240,7 +240,14 @@ def status(cmd: Status, console: Console) -> int:
 
 
 def _print_status_table(report: dict) -> None:
-    colors = {"cached": "green", "damaged": "red", "resumable": "yellow", "stale": "yellow", "missing": "red"}
+    colors = {
+        "cached": "green",
+        "damaged": "red",
+        "running": "cyan",
+        "resumable": "yellow",
+        "stale": "yellow",
+        "missing": "red",
+    }
     table = Table(title=escape(f"{report['robot'] or '(any robot)'}/{report['motion']} ({report['source']})"))
     for column in ("stage", "state", "key", "path"):
         table.add_column(column)
@@ -333,8 +340,9 @@ def export_motion(cmd: ExportMotion, console: Console) -> int:
 def fetch_lafan(cmd: FetchLafan, console: Console) -> int:
     from rd_pipeline.motion.lafan_download import install_lafan
 
-    installed = install_lafan(cmd.zip, paths.lafan_dir(), console)
-    console.print(escape(f"installed {len(installed)} BVH files into {paths.lafan_dir()}"))
+    target = paths.lafan_dir(existing=False)
+    installed = install_lafan(cmd.zip, target, console)
+    console.print(escape(f"installed {len(installed)} BVH files into {target}"))
     return 0
 
 
@@ -358,8 +366,7 @@ def motions(cmd: Motions, console: Console) -> int:
 
 
 def _run_trials(cmd: Sweep, trials: list[sweeps.Trial], label: str, console: Console):
-    if cmd.executor not in sweeps.EXECUTORS:
-        raise PipelineError(f"executor must be local or ray, got '{cmd.executor}'")
+    sweeps.require_executor(cmd.executor)
     for trial in trials:  # bad parameters fail here, before any work, with one line
         sweeps.trial_plan(trial, cmd.profile)
     out = sweeps.sweep_folder(label, trials, cmd.profile)

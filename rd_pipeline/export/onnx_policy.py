@@ -16,6 +16,7 @@ from pathlib import Path
 
 import torch
 
+from rd_pipeline.files import write_bytes_whole
 from rd_pipeline.policy_spec import ONNX_FILE, PolicySpec
 
 __all__ = ["ONNX_FILE", "export_onnx", "onnx_metadata"]
@@ -72,7 +73,7 @@ def export_onnx(module: torch.nn.Module, observation_size: int, spec: PolicySpec
         entry.key = key
         entry.value = value
     onnx.checker.check_model(model)
-    onnx.save(model, str(path))
+    write_bytes_whole(path, model.SerializeToString())
 
 
 @contextmanager

@@ -3,6 +3,7 @@ closely each file reproduces the training actor."""
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -15,6 +16,7 @@ from tensordict import TensorDict
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.export.exporter import build_policy_spec, load_actor, script_actor
 from rd_pipeline.export.onnx_policy import export_onnx
+from rd_pipeline.files import write_bytes_whole
 from rd_pipeline.policy_runtime import OnnxPolicy
 from rd_pipeline.policy_spec import ONNX_FILE, POLICY_FILE, SPEC_FILE, load_policy_spec
 from rd_pipeline.rl.training_config import TrainConfig
@@ -54,7 +56,10 @@ def export_policy(trained: TrainedPolicy, robot: Robot, iteration: int, rule: st
     hidden = list(trained.config.ppo.hidden_dims)
     actor = load_actor(checkpoints[iteration], trained.observation_size, trained.num_actions, hidden)
     scripted = script_actor(actor)
-    scripted.save(str(out_dir / POLICY_FILE))
+    # Through memory: torch's file writer turns a full disk into a RuntimeError.
+    buffer = io.BytesIO()
+    torch.jit.save(scripted, buffer)
+    write_bytes_whole(out_dir / POLICY_FILE, buffer.getvalue())
     spec = build_policy_spec(
         robot,
         trained.config.env,

@@ -9,9 +9,11 @@ from its own environment variables (`PET_NNODES`, `PET_NODE_RANK`, `PET_RDZV_END
 
 from __future__ import annotations
 
+import ctypes
 import dataclasses
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -27,6 +29,12 @@ from rd_pipeline.rl.training_log import LOG_FILE, checkpoint_iteration
 
 POLL_S = 1.0
 """How often the stage process reads the log of running ranks."""
+
+STOP_TIMEOUT_S = 60.0
+"""How long torchrun gets to stop its ranks on an interrupt before it is killed (it gives them 30 s)."""
+
+PR_SET_PDEATHSIG = 1
+"""prctl(2)'s option for the signal a process gets when its parent dies."""
 
 
 def job_files(work: Path) -> tuple[Path, Path, Path]:
@@ -57,7 +65,11 @@ def train_in_processes(job: TrainingJob, on_iteration: Callable[[dict], None]) -
     with output_file.open("w") as output:
         process = subprocess.Popen(command, stdout=output, stderr=subprocess.STDOUT)
         resumed_at = 0 if job.checkpoint is None else checkpoint_iteration(job.checkpoint)
-        followed = _follow_log(job.work / LOG_FILE, process, on_iteration, resumed_at)
+        try:
+            followed = _follow_log(job.work / LOG_FILE, process, on_iteration, resumed_at)
+        except BaseException:  # Ctrl-C or SIGTERM here: no rank may outlive the key's lock
+            _stop(process, STOP_TIMEOUT_S)
+            raise
     machine = os.environ.get("PET_NODE_RANK", "0")
     if process.returncode == 0 and machine != "0":
         raise ShareDone(
@@ -73,6 +85,18 @@ def train_in_processes(job: TrainingJob, on_iteration: Callable[[dict], None]) -
     for path in (job_file, outcome_file, output_file):
         path.unlink()
     return outcome
+
+
+def _stop(process: subprocess.Popen, timeout_s: float) -> None:
+    """Stop torchrun and its ranks: on SIGTERM torchrun stops the ranks it started (each in a
+    session of its own, out of reach of a signal to ours) and waits for them; past `timeout_s`
+    it is killed, and the ranks' parent-death signal ends them."""
+    process.terminate()
+    try:
+        process.wait(timeout_s)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()
 
 
 def _follow_log(log: Path, process: subprocess.Popen, on_iteration: Callable[[dict], None], after: int) -> int:
@@ -127,6 +151,7 @@ class _LogTail:
 
 def _rank_main(job_file: Path) -> None:
     """One rank of a data-parallel training (what torchrun starts)."""
+    _die_with_parent()
     job: TrainingJob = torch.load(job_file, weights_only=False)
     ranks = join_process_group(job.config.env.device)
     # The machine's cores are shared by its ranks: each steps its physics and runs torch on its
@@ -143,6 +168,17 @@ def _rank_main(job_file: Path) -> None:
             torch.save(outcome, outcome_file)
     finally:
         leave_process_group()
+
+
+def _die_with_parent() -> None:
+    """Ask Linux to send this rank SIGTERM when torchrun, its parent, dies however it dies (a
+    SIGKILL leaves it no time to stop its ranks): no rank trains on as an orphan."""
+    if not sys.platform.startswith("linux"):
+        return
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() == 1:  # the parent died before the request
+        os.kill(os.getpid(), signal.SIGTERM)
 
 
 if __name__ == "__main__":

@@ -32,6 +32,8 @@ from rd_pipeline.rl.training_log import (
     LOG_FILE,
     checkpoint_path,
     checkpoints_by_iteration,
+    intact_checkpoints,
+    seal_checkpoint,
 )
 from rd_pipeline.robots import Robot
 from rd_pipeline.sampling.sampler import SegmentSampler
@@ -190,14 +192,12 @@ def run_job(job: TrainingJob, on_iteration: Callable[[dict], None], ranks: Ranks
 def starting_checkpoint(
     work: Path, restart: bool, shorter: ShorterRun | None, say: Callable[[str], None]
 ) -> Path | None:
-    """Make `work` ready and return the checkpoint to start from: the newest one an interrupted
-    run left there (unless `restart`; resuming is exact, so the result is that of an uninterrupted
-    run), else the end of `shorter` copied in (a longer run is the shorter one continued, since
-    nothing in training depends on the total), else None in an emptied folder."""
-    checkpoints = list(checkpoints_by_iteration(work).values())
-    if checkpoints and not restart:
-        say(f"  continuing the interrupted run from {checkpoints[-1].name} in {work} (--force starts over)")
-        return checkpoints[-1]
+    """Make `work` ready and return the checkpoint to start from: the newest intact one an
+    interrupted run left there (unless `restart`; resuming is exact, so the result is that of an
+    uninterrupted run), else the end of `shorter` copied in (a longer run is the shorter one
+    continued, since nothing in training depends on the total), else None in an emptied folder."""
+    if checkpoints_by_iteration(work) and not restart:
+        return _continued_checkpoint(work, say)
     if work.exists():
         shutil.rmtree(work)
     work.mkdir(parents=True)
@@ -205,9 +205,27 @@ def starting_checkpoint(
         return None
     shutil.copytree(shorter.folder / CHECKPOINT_DIR, work / CHECKPOINT_DIR)
     shutil.copy2(shorter.folder / LOG_FILE, work / LOG_FILE)
+    # The artifact's manifest vouched for these files; the seal vouches from now on.
+    seal_checkpoint(work, shorter.iterations)
     (work / CONTINUED_FILE).write_text(shorter.key + "\n")
     say(f"  continuing the {shorter.iterations}-iteration run {shorter.key}")
     return checkpoint_path(work, shorter.iterations)
+
+
+def _continued_checkpoint(work: Path, say: Callable[[str], None]) -> Path:
+    """The newest intact checkpoint of an interrupted run; damaged newer ones are named and
+    deleted (the run saves them again)."""
+    intact, damaged = intact_checkpoints(work)
+    if intact is None:
+        newest, problem = next(iter(damaged.items()))
+        raise PipelineError(
+            f"{work}: no checkpoint there can be continued ({newest.name}: {problem}); `--force` starts over"
+        )
+    for path, problem in damaged.items():
+        say(f"  {path.name} is damaged ({problem}): not continued from, deleted")
+        path.unlink()
+    say(f"  continuing the interrupted run from {intact.name} in {work} (--force starts over)")
+    return intact
 
 
 def clip_segments(segments: Segments, start: int, end: int, fps: float) -> Segments:

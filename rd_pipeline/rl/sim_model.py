@@ -18,7 +18,7 @@ import numpy as np
 
 from rd_pipeline.rl.env_config import CollisionModel
 from rd_pipeline.robots import Robot
-from rd_pipeline.robots.assets import asset_path
+from rd_pipeline.robots.assets import robot_file
 from rd_pipeline.robots.primitives import fit_collision_meshes
 
 
@@ -41,7 +41,7 @@ def simulation_model(
     `body_sensors` adds the sensors a batched rollout reads its results from (`add_body_sensors`);
     `solver` caps the constraint solver's work (None: MuJoCo's defaults)."""
     config = robot.config
-    spec = _pd_spec(asset_path(config.mjcf), config.joint_names, config.kp, config.kd, config.effort_limit, timestep)
+    spec = _pd_spec(robot_file(config, "mjcf"), config.joint_names, config.kp, config.kd, config.effort_limit, timestep)
     if solver is not None:
         spec.option.iterations = solver.iterations
         spec.option.ls_iterations = solver.ls_iterations

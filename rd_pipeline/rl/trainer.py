@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import time
@@ -15,11 +16,12 @@ import torch
 from tensordict import TensorDict
 
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.files import write_bytes_whole
 from rd_pipeline.rl.distributed import ONE_PROCESS, Ranks, gather_to_leader, summed, weights_digest
 from rd_pipeline.rl.env import TrackingEnv
 from rd_pipeline.rl.ppo import MultiHeadPPO
 from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.training_log import LOG_FILE, checkpoint_path
+from rd_pipeline.rl.training_log import LOG_FILE, checkpoint_path, logged_iteration, seal_checkpoint
 
 
 def rank_state(env: TrackingEnv) -> dict:
@@ -34,18 +36,22 @@ def rank_state(env: TrackingEnv) -> dict:
     }
 
 
-def save_checkpoint(path: Path, iteration: int, ppo: MultiHeadPPO, rank_states: list[dict]) -> None:
-    """Written beside its final name and renamed, so an interrupted save never leaves a torn checkpoint."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_suffix(".partial")
+def save_checkpoint(folder: Path, iteration: int, ppo: MultiHeadPPO, rank_states: list[dict]) -> None:
+    """Save the checkpoint of `iteration` into the training `folder` whole (never torn) and seal
+    it with its hash and the log's; a folder removed while training ran stops the run."""
+    if not folder.is_dir():
+        raise PipelineError(f"{folder} was removed while training ran; the run stops (its progress went with it)")
     state = {
         "iteration": iteration,
         "algorithm": ppo.save(),
         "learning_rate": ppo.learning_rate,
         "ranks": rank_states,
     }
-    torch.save(state, partial)
-    os.replace(partial, path)
+    # Serialized in memory first: torch's file writer turns a full disk into a RuntimeError.
+    buffer = io.BytesIO()
+    torch.save(state, buffer)
+    write_bytes_whole(checkpoint_path(folder, iteration), buffer.getvalue())
+    seal_checkpoint(folder, iteration)
 
 
 def load_checkpoint(path: Path, ppo: MultiHeadPPO, env: TrackingEnv, ranks: Ranks = ONE_PROCESS) -> int:
@@ -119,7 +125,7 @@ def train(
         log.flush()
         on_iteration(row)
         if checkpoint:
-            save_checkpoint(checkpoint_path(out_dir, done), done, ppo, states)
+            save_checkpoint(out_dir, done, ppo, states)
     if log is not None:
         log.close()
     return history
@@ -196,17 +202,9 @@ def _drop_rows_after(path: Path, iteration: int) -> None:
     if not path.exists():
         return
     lines = path.read_text().splitlines()
-    kept = [line for line in lines if _logged_iteration(line) <= iteration]
+    kept = [line for line in lines if logged_iteration(line) <= iteration]
     if kept == lines:
         return
     partial = path.with_suffix(".partial")
     partial.write_text("".join(line + "\n" for line in kept))
     os.replace(partial, path)
-
-
-def _logged_iteration(line: str) -> float:
-    """The iteration of a log line; infinity for a line cut short by an interruption."""
-    try:
-        return json.loads(line)["iteration"]
-    except (json.JSONDecodeError, KeyError):
-        return float("inf")

@@ -3,11 +3,13 @@ no torch, so reading results stays light."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 from typing import Literal
 
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.files import file_sha256, write_bytes_whole
 
 CHECKPOINT_DIR = "checkpoints"
 LOG_FILE = "training_log.jsonl"
@@ -67,3 +69,65 @@ def best_held(folder: Path, first: ScoreFirst = "start_zero", rows: list[dict] |
     held = checkpoints_by_iteration(folder)
     logged = read_training_log(folder) if rows is None else rows
     return best_scored([row for row in logged if row["iteration"] in held], first)
+
+
+SEAL_DIR = ".seals"
+"""A work folder's record of each checkpoint as saved: its sha256 and that of the log rows up to
+it. Only an interrupted run reads them; a finished artifact's manifest hashes its files."""
+
+
+def seal_checkpoint(folder: Path, iteration: int) -> None:
+    """Record the checkpoint of `iteration` and the log it was saved with, as they are now."""
+    seal = {
+        "sha256": file_sha256(checkpoint_path(folder, iteration)),
+        "log_sha256": _log_sha256(folder, iteration),
+    }
+    write_bytes_whole(_seal_path(folder, iteration), json.dumps(seal).encode())
+
+
+def intact_checkpoints(folder: Path) -> tuple[Path | None, dict[Path, str]]:
+    """The newest checkpoint of `folder` that matches its seal, with the log rows it was saved
+    with; and what is wrong with each newer one."""
+    damaged: dict[Path, str] = {}
+    for iteration, path in reversed(checkpoints_by_iteration(folder).items()):
+        problem = _seal_problem(folder, iteration)
+        if problem is None:
+            return path, damaged
+        damaged[path] = problem
+    return None, damaged
+
+
+def _seal_problem(folder: Path, iteration: int) -> str | None:
+    try:
+        seal = json.loads(_seal_path(folder, iteration).read_text())
+    except (OSError, ValueError):
+        return "its save did not finish (no seal)"
+    if file_sha256(checkpoint_path(folder, iteration)) != seal["sha256"]:
+        return "its bytes changed since it was saved"
+    if _log_sha256(folder, iteration) != seal["log_sha256"]:
+        return f"{LOG_FILE} no longer holds the rows it was saved with"
+    return None
+
+
+def _log_sha256(folder: Path, iteration: int) -> str | None:
+    """sha256 of the log's lines up to `iteration` (None without a log)."""
+    path = folder / LOG_FILE
+    if not path.is_file():
+        return None
+    digest = hashlib.sha256()
+    for line in path.read_bytes().splitlines(keepends=True):
+        if logged_iteration(line) <= iteration:
+            digest.update(line)
+    return digest.hexdigest()
+
+
+def logged_iteration(line: str | bytes) -> float:
+    """A log line's iteration; infinity for a line cut short by an interruption."""
+    try:
+        return json.loads(line)["iteration"]
+    except (ValueError, KeyError, TypeError):
+        return float("inf")
+
+
+def _seal_path(folder: Path, iteration: int) -> Path:
+    return folder / SEAL_DIR / f"model_{iteration}.json"

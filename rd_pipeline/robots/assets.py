@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 from rd_pipeline import paths
 from rd_pipeline.errors import PipelineError
+
+if TYPE_CHECKING:
+    from rd_pipeline.robots.config import RobotConfig
 
 
 def assets_root() -> Path:
@@ -25,11 +29,19 @@ def assets_root() -> Path:
         ) from None
 
 
-def asset_path(relative: str) -> Path:
+def asset_path(relative: str, named_by: str = "") -> Path:
+    """A robot model file under the assets folder; `named_by` (the TOML and key that name it)
+    goes into the error when it is missing."""
     path = assets_root() / relative
     if not path.is_file():
-        raise PipelineError(f"{path}: robot model file not found (check RD_ROBOT_ASSETS)")
+        by = f", named by {named_by}" if named_by else ""
+        raise PipelineError(f"{path}: robot model file not found{by} (check RD_ROBOT_ASSETS)")
     return path
+
+
+def robot_file(config: RobotConfig, field: Literal["mjcf", "urdf"]) -> Path:
+    """The robot's MJCF or URDF, named by `asset.<field>` of its TOML."""
+    return asset_path(getattr(config, field), f"asset.{field} of {config.source}")
 
 
 def model_files(name: str | None) -> dict[str, Path]:
@@ -39,4 +51,4 @@ def model_files(name: str | None) -> dict[str, Path]:
     if name is None:
         raise PipelineError("this stage needs --robot")
     config = load_robot_config(name)
-    return {"robot_config": config.source, "mjcf": asset_path(config.mjcf)}
+    return {"robot_config": config.source, "mjcf": robot_file(config, "mjcf")}

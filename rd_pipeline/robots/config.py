@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from rd_pipeline import paths
-from rd_pipeline.errors import PipelineError
+from rd_pipeline.errors import PipelineError, nearest
 from rd_pipeline.paths import ROBOT_CONFIG_DIR
 
 
@@ -104,6 +104,7 @@ def load_robot_config(name: str, path: Path | None = None) -> RobotConfig:
         raw = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
         raise PipelineError(f"{path}: {exc}") from None
+    _check_layout(raw, path)
     reader = _Fields(raw, path)
     joints = reader.names("joints.order")
     policy_joints = reader.names("joints.policy", everything="all", whole=joints)
@@ -139,6 +140,40 @@ def load_robot_config(name: str, path: Path | None = None) -> RobotConfig:
         raise PipelineError(f"{path}: name is '{config.name}' but the file is for robot '{name}'")
     _check_internal(config)
     return config
+
+
+LAYOUT: dict[str, tuple[str, ...]] = {
+    "": ("name", "description", "asset", "joints", "bodies", "collision", "dataset"),
+    "asset": ("mjcf", "urdf"),
+    "joints": (
+        "order",
+        "policy",
+        "residual_indices",
+        "kp",
+        "kd",
+        "effort_limit",
+        "velocity_limit",
+        "default_pos",
+        "retarget_range",
+    ),
+    "bodies": ("root", "feet", "tracking", "keypoints", "termination", "retarget"),
+    "collision": ("pairs",),
+    "dataset": ("csv_joints",),
+}
+"""The tables of a robot TOML and the keys each holds (below them, joint patterns and body names)."""
+
+
+def _check_layout(raw: dict, path: Path) -> None:
+    """Refuse a key or table a robot TOML does not have (a misspelt one would be ignored)."""
+    for table, keys in LAYOUT.items():
+        node = raw.get(table, {}) if table else raw
+        if not isinstance(node, dict):
+            continue  # a table given as a value: the typed reading names it
+        where = f"in [{table}]" if table else "at the top"
+        for key in node:
+            if key not in keys:
+                hint = nearest(key, keys)
+                raise PipelineError(f"{path}: unknown key '{key}' {where}{hint} (keys: {', '.join(keys)})")
 
 
 def _check_internal(config: RobotConfig) -> None:

@@ -11,7 +11,7 @@ import mujoco
 import numpy as np
 
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.robots.assets import asset_path
+from rd_pipeline.robots.assets import robot_file
 from rd_pipeline.robots.config import RobotConfig, load_robot_config
 
 
@@ -60,7 +60,7 @@ def load_robot(name: str) -> Robot:
 @lru_cache(maxsize=8)
 def _load_robot_cached(name: str) -> Robot:
     config = load_robot_config(name)
-    path = asset_path(config.mjcf)
+    path = robot_file(config, "mjcf")
     try:
         model = mujoco.MjModel.from_xml_path(str(path))
     except ValueError as exc:
@@ -128,7 +128,7 @@ def load_pinocchio_model(config: RobotConfig):
     """Pinocchio model from the URDF with a free-flyer root (kinematics only, no meshes needed)."""
     import pinocchio as pin
 
-    path = asset_path(config.urdf)
+    path = robot_file(config, "urdf")
     text = path.read_text()
     # h1_2_handless.urdf has anonymous <material> tags that urdfdom rejects; name them in memory.
     counter = iter(range(10**6))

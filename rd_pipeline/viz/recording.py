@@ -28,39 +28,50 @@ def record_motion(
     ]
     if not human_files and not reference_files:
         raise PipelineError(f"nothing to show for {robot}/{motion}: no motion artifacts")
-    rec = open_recording(f"{robot}_{motion}", out)
-    for path in human_files:
-        log_human(rec, HumanMotion.load(path))
+    model = None
     if reference_files:
         from rd_pipeline.robots import load_robot
 
         model = load_robot(robot).model
+    with open_recording(f"{robot}_{motion}", out) as rec:
+        for path in human_files:
+            log_human(rec, HumanMotion.load(path))
         for stage, path in reference_files:
-            reference = ReferenceMotion.load(path)
-            log_robot_meshes(
-                rec,
-                model,
-                reference.body_names,
-                reference.body_pos_w,
-                reference.body_quat_w,
-                reference.fps,
-                entity=f"robot/{stage}",
-            )
-            targets = path.parent / TARGETS_FILE
-            if targets.is_file():
-                with open_npz(targets) as data:
-                    log_points(rec, f"targets/{stage}", data["positions"], reference.fps, TARGET_COLOR, 0.015)
-            series = path.parent / QUALITY_SERIES_FILE
-            if series.is_file():
-                # The rulers as plots on the same timeline: a bad frame is a spike to click on.
-                with open_npz(series) as data:
-                    for name in data.files:
-                        if name.endswith(("_m", "_m_s", "_deg")):  # measures, not body indices
-                            log_series(rec, f"quality/{stage}/{name}", data[name], reference.fps)
-            if tracked is not None:
-                log_tracked(rec, model, reference, tracked, SIDE_BY_SIDE_M)
-    rec.flush()
+            _log_reference(rec, model, stage, path, tracked)
     return out
+
+
+def _log_reference(rec, model, stage: str, path: Path, tracked: Path | None) -> None:
+    """One stage's robot reference, its IK targets and quality rulers, and the tracked robot."""
+    reference = ReferenceMotion.load(path)
+    _log_robot(rec, model, reference, f"robot/{stage}")
+    targets = path.parent / TARGETS_FILE
+    if targets.is_file():
+        with open_npz(targets) as data:
+            log_points(rec, f"targets/{stage}", data["positions"], reference.fps, TARGET_COLOR, 0.015)
+    series = path.parent / QUALITY_SERIES_FILE
+    if series.is_file():
+        # The rulers as plots on the same timeline: a bad frame is a spike to click on.
+        with open_npz(series) as data:
+            for name in data.files:
+                if name.endswith(("_m", "_m_s", "_deg")):  # measures, not body indices
+                    log_series(rec, f"quality/{stage}/{name}", data[name], reference.fps)
+    if tracked is not None:
+        log_tracked(rec, model, reference, tracked, SIDE_BY_SIDE_M)
+
+
+def _log_robot(rec, model, reference: ReferenceMotion, entity: str, first_frame: int = 0) -> None:
+    """The robot of a reference motion as meshes on the frame timeline."""
+    log_robot_meshes(
+        rec,
+        model,
+        reference.body_names,
+        reference.body_pos_w,
+        reference.body_quat_w,
+        reference.fps,
+        entity,
+        first_frame=first_frame,
+    )
 
 
 TRACKED_COLOR = (240, 150, 40)
@@ -99,17 +110,7 @@ def record_tracking(
 ) -> Path:
     """The reference robot and the tracked (simulated) robot side by side on one timeline (the
     tracked one shifted `SIDE_BY_SIDE_M` along +y); `reference` is a clip starting at `first_frame`."""
-    rec = open_recording(name, out)
-    log_robot_meshes(
-        rec,
-        model,
-        reference.body_names,
-        reference.body_pos_w,
-        reference.body_quat_w,
-        reference.fps,
-        "robot/reference",
-        first_frame=first_frame,
-    )
-    log_tracked(rec, model, reference, tracked, SIDE_BY_SIDE_M)
-    rec.flush()
+    with open_recording(name, out) as rec:
+        _log_robot(rec, model, reference, "robot/reference", first_frame)
+        log_tracked(rec, model, reference, tracked, SIDE_BY_SIDE_M)
     return out

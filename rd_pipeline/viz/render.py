@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rd_pipeline.evaluation.validation_config import RenderConfig
+from rd_pipeline.files import write_bytes_whole
 
 if TYPE_CHECKING:
     # Imported where it renders: this process's MuJoCo is not the one `MUJOCO_GL` chose.
@@ -56,7 +57,10 @@ def render_pictures(model: mujoco.MjModel, scene: Scene, look: RenderConfig, out
 
     work = out_dir / ".render"
     work.mkdir(exist_ok=True)
-    mujoco.mj_saveModel(model, str(work / MODEL_FILE), None)
+    # Through memory: MuJoCo's own file writer does not report a full disk.
+    binary = np.zeros(mujoco.mj_sizeModel(model), dtype=np.uint8)
+    mujoco.mj_saveModel(model, None, binary)
+    write_bytes_whole(work / MODEL_FILE, binary.tobytes())
     np.savez(work / SCENE_FILE, tracked=scene.tracked, reference=scene.reference)
     meta = {**asdict(look), "title": scene.title, "control_hz": scene.control_hz, "ended_by": scene.ended_by}
     (work / "scene.json").write_text(json.dumps(meta))

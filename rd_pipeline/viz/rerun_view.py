@@ -8,13 +8,15 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import mujoco
 import numpy as np
 import rerun as rr
 
+from rd_pipeline.files import write_bytes_whole
 from rd_pipeline.motion.human import HumanMotion
 
 FRAME_TIMELINE = "frame"
@@ -136,13 +138,18 @@ def display_available() -> bool:
     return sys.platform in ("darwin", "win32") or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
-def open_recording(name: str, out: Path | None) -> rr.RecordingStream:
-    """A recording that streams to an `.rrd` file (headless), else to a spawned viewer."""
+@contextmanager
+def open_recording(name: str, out: Path | None) -> Iterator[rr.RecordingStream]:
+    """A recording to log into. With `out` it is kept in memory and written to that `.rrd` whole
+    when the block ends (rerun's own file sink can hang on a full disk); without, it streams to a
+    spawned viewer."""
     rec = rr.RecordingStream(application_id="rd_pipeline", recording_id=name)
-    if out is not None:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        rec.save(str(out))
-    else:
+    memory = rec.memory_recording() if out is not None else None
+    if out is None:
         rec.spawn()
     rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    return rec
+    yield rec
+    if out is None or memory is None:
+        rec.flush()
+        return
+    write_bytes_whole(out, memory.drain_as_bytes())
