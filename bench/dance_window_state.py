@@ -31,7 +31,7 @@ from pathlib import Path
 from rd_pipeline.api import workspace
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.rl.runner import CONTINUED_FILE
-from rd_pipeline.rl.training_log import CHECKPOINT_DIR, LOG_FILE, checkpoints_by_iteration
+from rd_pipeline.rl.training_log import CHECKPOINT_DIR, LOG_FILE, checkpoints_by_iteration, seal_checkpoint
 
 STATE_FILE = "state.json"
 """What the saved checkpoint belongs to (robot, motion, clip, train key, iteration)."""
@@ -112,6 +112,7 @@ def _restore(args: argparse.Namespace, work: Path) -> None:
     shutil.copy2(state_dir / state["checkpoint"], work / CHECKPOINT_DIR / state["checkpoint"])
     with gzip.open(state_dir / f"{LOG_FILE}.gz", "rb") as packed, (work / LOG_FILE).open("wb") as log:
         shutil.copyfileobj(packed, log)
+    seal_checkpoint(work, state["iteration"])  # the state vouched for it; the run checks the seal
     print(f"restored {state['checkpoint']} (train {state['train_key']}) into {work}")
 
 
@@ -137,6 +138,8 @@ def _fork(plan: workspace.Plan, key: str, work: Path, stage: workspace.Plan) -> 
         shutil.copy2(folder / CONTINUED_FILE, filling / CONTINUED_FILE)
     lines = (folder / LOG_FILE).read_text().splitlines(keepends=True)
     (filling / LOG_FILE).write_text("".join(line for line in lines if json.loads(line)["iteration"] <= at))
+    for iteration in held:
+        seal_checkpoint(filling, iteration)
     # What a work folder without checkpoints holds is a start that trained nothing to keep.
     shutil.rmtree(into, ignore_errors=True)
     filling.rename(into)

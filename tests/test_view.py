@@ -70,3 +70,19 @@ def test_view_without_a_display_writes_the_recording_and_says_how_to_open_it(art
     message = " ".join(result.stderr.split())
     assert f"wrote {out}; open it with `rerun {out}`" in message
     assert _rows_per_entity(out)["/robot/import/pelvis"] == 11285
+
+
+@pytest.mark.slow
+def test_view_out_to_a_folder_or_below_a_file_is_one_line_and_writes_nothing(artifacts: Path, tmp_path: Path) -> None:
+    folder = tmp_path / "recordings"
+    folder.mkdir()
+    afile = tmp_path / "a-file"
+    afile.write_text("")
+    said = {}
+    for out in (folder, afile / "take.rrd"):
+        result = cli("view", "--robot", "h1", "--motion", "dance2_subject3", "--out", str(out))
+        assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
+        said[out] = result.stderr.strip().splitlines()[-1]
+    assert said[folder] == f"error: cannot write the recording {folder} (Is a directory)"
+    assert said[afile / "take.rrd"].startswith(f"error: cannot write the recording {afile}")
+    assert list(folder.iterdir()) == [] and afile.read_text() == ""
