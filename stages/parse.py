@@ -38,9 +38,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     clip = read_bvh(ctx.inputs["bvh"])
     missing = missing_lafan_joints(clip.names)
     if missing:
-        raise PipelineError(
-            f"{ctx.inputs['bvh']}: not a LAFAN1 skeleton; it lacks the joints {', '.join(missing)}"
-        )
+        raise PipelineError(f"{ctx.inputs['bvh']}: not a LAFAN1 skeleton; it lacks the joints {', '.join(missing)}")
     short = too_short(str(ctx.inputs["bvh"]), clip.channels.shape[0], 1.0 / clip.frame_time)
     if short:
         raise PipelineError(short)
