@@ -1,0 +1,307 @@
+"""Benchmark: samples to dance. Arms of the PPO recipe trained side by side on dance windows to
+doubling sample budgets, losing arms stopped at each budget, every frozen checkpoint validated.
+
+    python bench/tracking_efficiency.py --window g1_d1s2 --arms paper noise_0.5 noise_0.3 noise_0.1 \\
+        --seeds 0 1 --rungs 1 2 4 8 [--jobs 2]        # train, prune, validate
+    python bench/tracking_efficiency.py --window g1_d1s2 --report   # curves and table only
+
+Each (window, arm, seed) is one pipeline (the `cpu` profile, the arm's overrides, `--seed`),
+grown rung by rung with `--resume`: the training of a rung continues the finished run of the
+rung before, so a curve costs its longest budget only. A rung's checkpoint is the run's last,
+fixed by its budget before anything is looked at; it is exported and validated (nominal and
+randomized physics, `VALIDATE`). Which arms go on is decided by Optuna's successive-halving
+pruner on train's own score at that checkpoint (start-zero survival on randomized physics from
+a seed of its own, mean over seeds), never on the validation figures this bench reports. The
+rungs are run in lock-step: every live arm reports a rung before any is judged, so each is
+judged against the whole rung.
+
+Writes `bench/results/tracking_efficiency/<window>/`: `runs/<arm>_seed<k>_<M>M.json` (samples,
+hours, train's score, the validation's figures, the verdict, the train and validate keys, the
+commit), `curves.png` and `table.md`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import optuna
+from provenance import head_commit
+from training_hours import training_hours
+
+from rd_pipeline.api import windows, workspace
+from rd_pipeline.evaluation.validation_report import ValidationReport
+from rd_pipeline.rl.training_log import read_training_log
+
+
+@dataclass(frozen=True)
+class Window:
+    """A stretch of a take to learn: a fixed clip, or the take's 10 s window at the median joint
+    speed of its windows (what `rd-pipeline run --window 10 --window-speed 0.5` trains)."""
+
+    robot: str
+    motion: str
+    source: str
+    """`bvh`: retargeted by this project; `csv`: the dataset's retargeting."""
+    clip: str | None = None
+    """start:end seconds; None: the median-speed 10 s window."""
+
+    def resolved(self) -> Window:
+        if self.clip is not None:
+            return self
+        whole = workspace.plan(self.robot, self.motion, PROFILE, source=self.source)
+        workspace.run(whole, until=workspace.providing(whole, "reference"))
+        return replace(self, clip=windows.speed_window(whole, 10, 0.5).clip)
+
+
+WINDOWS = {
+    # The window of the earlier studies (bench/results/dance_window*.json).
+    "g1_d1s2": Window("g1", "dance1_subject2", "bvh", "11:21"),
+    "g1_d1s3": Window("g1", "dance1_subject3", "bvh"),
+    "h1_2_d1s1": Window("h1_2", "dance1_subject1", "bvh"),
+}
+
+
+PROFILE = "cpu"
+
+ARMS: dict[str, tuple[str, ...]] = {
+    "paper": (),
+    # Initial action noise: the paper's 0.894 times the action scale down to MimicKit's scale.
+    "noise_0.5": ("train.ppo.init_noise_std=0.5",),
+    "noise_0.3": ("train.ppo.init_noise_std=0.3",),
+    "noise_0.1": ("train.ppo.init_noise_std=0.1",),
+}
+"""Arm -> its `--set` overrides on the `cpu` profile (each lever of the recipe, one at a time)."""
+
+VALIDATE = (
+    "validate.randomized.seeds=10001,10002",
+    "validate.randomized.models_per_seed=2",
+    "validate.other_physics.enabled=false",
+    "validate.render.enabled=false",
+)
+"""A lighter validation per rung (2 randomized seeds, no other physics, no pictures), fixed
+before any run; the frozen checkpoints of `frozen_checkpoints.md` have the full one."""
+
+RESULTS = Path("bench/results/tracking_efficiency")
+
+
+def main() -> None:
+    args = _parser().parse_args()
+    window = WINDOWS[args.window].resolved()
+    folder = RESULTS / args.window
+    folder.mkdir(parents=True, exist_ok=True)
+    if not args.report:
+        _study(args, window, folder)
+    rows = _rows(folder)
+    _table(rows, folder / "table.md")
+    _curves(rows, window, folder / "curves.png")
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--window", choices=WINDOWS, default="g1_d1s2")
+    parser.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
+    parser.add_argument("--rungs", nargs="+", type=float, default=[1, 2, 4, 8], help="budgets in M samples")
+    parser.add_argument("--eta", type=int, default=2, help="1/eta of the arms go on at each rung")
+    parser.add_argument("--jobs", type=int, default=2, help="pipelines at once (threads split the cores)")
+    parser.add_argument("--report", action="store_true", help="only redraw the table and the curves")
+    return parser
+
+
+def _study(args: argparse.Namespace, window: Window, folder: Path) -> None:
+    """Successive halving over the arms, rung by rung, through Optuna's pruner. Runs already in
+    the store are cached, so a later sitting with more rungs redoes no training and comes to the
+    same verdicts before it goes on."""
+    pruner = optuna.pruners.SuccessiveHalvingPruner(
+        min_resource=args.rungs[0], reduction_factor=args.eta, min_early_stopping_rate=0
+    )
+    study = optuna.create_study(direction="maximize", pruner=pruner)
+    live = {arm: study.ask() for arm in args.arms}
+    score: dict[str, float] = {}
+    for rung in args.rungs:
+        jobs = [(window, arm, seed, rung, args) for arm in live for seed in args.seeds]
+        with ThreadPoolExecutor(args.jobs) as pool:
+            rows = list(pool.map(lambda job: _run(*job), jobs))
+        for arm, trial in live.items():
+            score[arm] = _mean([row for row in rows if row["arm"] == arm], "train_score_s")
+            trial.report(score[arm], step=rung)
+        for arm, trial in list(live.items()):
+            if len(live) > 1 and trial.should_prune():
+                study.tell(trial, state=optuna.trial.TrialState.PRUNED)
+                del live[arm]
+                for row in rows:
+                    row["verdict"] = f"stopped at {rung:g} M" if row["arm"] == arm else row.get("verdict", "")
+        _record(folder, rows)
+    for arm, trial in live.items():
+        study.tell(trial, score[arm])
+
+
+def _iterations(window: Window, arm: str, rung: float, args: argparse.Namespace) -> tuple[int, int]:
+    """(iterations, checkpoint_every) of a rung: whole multiples of the first rung's iterations,
+    so every rung is the one before grown (`--resume`) and ends on a checkpoint."""
+    plan = workspace.plan(window.robot, window.motion, PROFILE, overrides=ARMS[arm], source=window.source)
+    per_iteration = plan.pipeline.params["train"].samples_per_iteration
+    first = round(args.rungs[0] * 1e6 / per_iteration)
+    return first * round(rung / args.rungs[0]), first
+
+
+def _sets(window: Window, arm: str, rung: float, args: argparse.Namespace) -> tuple[str, ...]:
+    iterations, every = _iterations(window, arm, rung, args)
+    cores = max(1, (os.cpu_count() or 1) // args.jobs)
+    return (
+        f"train.clip={window.clip}",
+        f"train.iterations={iterations}",
+        f"train.checkpoint_every={every}",
+        f"train.env.threads={cores}",
+        *ARMS[arm],
+        *VALIDATE,
+    )
+
+
+def _run(window: Window, arm: str, seed: int, rung: float, args: argparse.Namespace) -> dict[str, Any]:
+    """Train (growing the rung before), export and validate one arm and seed at one budget."""
+    sets = _sets(window, arm, rung, args)
+    take = ("--robot", window.robot, "--motion", window.motion, "--source", window.source)
+    command = [sys.executable, "-m", "rd_pipeline", "run", *take, "--profile", PROFILE, "--seed", str(seed)]
+    env = {**os.environ, "OMP_NUM_THREADS": str(max(1, (os.cpu_count() or 1) // args.jobs))}
+    print(f"{arm} seed {seed}: {rung:g} M samples", flush=True)
+    done = subprocess.run([*command, "--resume", "--set", *sets], env=env, capture_output=True, text=True)
+    if done.returncode:
+        raise SystemExit(f"{arm} seed {seed} at {rung:g} M: {done.stderr.strip().splitlines()[-1]}")
+    plan = workspace.plan(window.robot, window.motion, PROFILE, overrides=sets, seed=seed, source=window.source)
+    return _row(plan, arm, seed, rung)
+
+
+def _row(plan: workspace.Plan, arm: str, seed: int, rung: float) -> dict[str, Any]:
+    train = workspace.required_artifact(plan, "train")
+    validate = workspace.required_artifact(plan, "validate")
+    last = read_training_log(train)[-1]
+    report = ValidationReport.load(validate)
+    randomized = report.protocols["randomized"]["policy"]
+    zero = report.protocols["randomized"]["zero_action"]
+    return {
+        "arm": arm,
+        "seed": seed,
+        "rung_m": rung,
+        "samples": int(json.loads((train / "manifest.json").read_text())["metrics"]["samples"]),
+        **training_hours(train),
+        "train_score_s": last["start_zero_s"],
+        "nominal_start_zero_s": report.start_zero_survival_s,
+        "nominal_mean_s": report.mean_survival_s,
+        "nominal_zero_action_mean_s": report.zero_action_mean_survival_s,
+        "randomized_start_zero_s": randomized["start_zero_s"]["mean"],
+        "randomized_mean_s": randomized["mean_survival_s"]["mean"],
+        "randomized_zero_action_mean_s": zero["mean_survival_s"]["mean"],
+        "tracked_pct": report.tracked_pct,
+        "train_key": plan.stage("train").key,
+        "validate_key": plan.stage("validate").key,
+        "commit": head_commit(),
+    }
+
+
+def _record(folder: Path, rows: list[dict[str, Any]]) -> None:
+    """One file per arm, seed and rung (a later sitting rewrites it with the same figures)."""
+    runs = folder / "runs"
+    runs.mkdir(exist_ok=True)
+    for row in rows:
+        name = f"{row['arm']}_seed{row['seed']}_{row['rung_m']:g}M.json"
+        (runs / name).write_text(json.dumps(row, indent=1) + "\n")
+
+
+def _rows(folder: Path) -> list[dict[str, Any]]:
+    return [json.loads(path.read_text()) for path in sorted((folder / "runs").glob("*.json"))]
+
+
+BAR = {"nominal_start_zero_s": 9.5, "nominal_mean_s": 4.5}
+"""The issue's bar for G1 dance1_subject2 11-21 s: both on nominal physics, on every seed."""
+
+
+def _by_arm(rows: list[dict[str, Any]]) -> dict[str, dict[float, list[dict[str, Any]]]]:
+    """arm -> rung -> its seeds' rows."""
+    grouped: dict[str, dict[float, list[dict[str, Any]]]] = {}
+    for row in rows:
+        grouped.setdefault(row["arm"], {}).setdefault(row["rung_m"], []).append(row)
+    return grouped
+
+
+def _mean(rows: list[dict[str, Any]], field: str) -> float:
+    return sum(row[field] for row in rows) / len(rows)
+
+
+def _table(rows: list[dict[str, Any]], path: Path) -> None:
+    """Per arm and budget: the seeds' mean figures, hours, train's score and the verdict."""
+    fields = ("nominal_start_zero_s", "nominal_mean_s", "randomized_start_zero_s", "randomized_mean_s")
+    lines = [
+        "| arm | M samples | seeds | "
+        + " | ".join(fields)
+        + " | zero action mean (nominal) | train score s | hours | verdict |",
+        "|---" * (len(fields) + 7) + "|",
+    ]
+    for arm, rungs in _by_arm(rows).items():
+        for rung, seeds in sorted(rungs.items()):
+            figures = " | ".join(f"{_mean(seeds, field):.2f}" for field in fields)
+            hours = sum(row["wall_h"] for row in seeds)
+            verdict = next((row["verdict"] for row in seeds if row.get("verdict")), "")
+            zero = _mean(seeds, "nominal_zero_action_mean_s")
+            score = _mean(seeds, "train_score_s")
+            lines.append(
+                f"| {arm} | {rung:g} | {len(seeds)} | {figures} | {zero:.2f} | {score:.2f} | {hours:.2f} | {verdict} |"
+            )
+    met = [
+        f"{arm} at {rung:g} M"
+        for arm, rungs in _by_arm(rows).items()
+        for rung, seeds in sorted(rungs.items())
+        if all(row[field] >= bar for row in seeds for field, bar in BAR.items())
+    ]
+    lines += [
+        "",
+        f"Bar (nominal start-zero >= 9.5 s and fixed-grid mean >= 4.5 s on every seed): {', '.join(met) or 'not met'}",
+    ]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _curves(rows: list[dict[str, Any]], window: Window, path: Path) -> None:
+    """Fixed-grid mean and start-zero survival against samples (log axis), nominal and
+    randomized, each arm's seeds as points and their mean as a line, zero action dashed."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    panels = (
+        ("nominal_mean_s", "nominal_zero_action_mean_s", "fixed-grid mean, nominal (s)"),
+        ("nominal_start_zero_s", None, "start-zero, nominal (s)"),
+        ("randomized_mean_s", "randomized_zero_action_mean_s", "fixed-grid mean, randomized (s)"),
+        ("randomized_start_zero_s", None, "start-zero, randomized (s)"),
+    )
+    figure, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6))
+    for axis, (field, zero, title) in zip(axes, panels):
+        for arm, rungs in _by_arm(rows).items():
+            budgets = sorted(rungs)
+            samples = [_mean(rungs[b], "samples") for b in budgets]
+            line = axis.plot(samples, [_mean(rungs[b], field) for b in budgets], marker="o", label=arm)[0]
+            for budget in budgets:
+                dots = [row[field] for row in rungs[budget]]
+                axis.scatter([_mean(rungs[budget], "samples")] * len(dots), dots, color=line.get_color(), s=8)
+        if zero is not None and rows:
+            axis.axhline(_mean(rows, zero), color="grey", linestyle="--", label="zero action")
+        axis.set_xscale("log")
+        axis.set_xlabel("samples")
+        axis.set_title(title, fontsize=10)
+    axes[0].legend(fontsize=8)
+    figure.suptitle(f"{window.robot} {window.motion} {window.clip} s ({window.source}): survival against samples")
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+if __name__ == "__main__":
+    main()
