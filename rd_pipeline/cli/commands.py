@@ -286,7 +286,7 @@ def view(cmd: View, console: Console) -> int:
     try:
         path = record_motion(cmd.robot, cmd.motion, artifacts, out, tracked)
     except OSError as exc:
-        raise PipelineError(f"cannot write the recording {exc.filename or out} ({exc.strerror})") from None
+        raise PipelineError(f"cannot write the recording {out} ({exc.strerror})") from None
     if path is not None:
         hint = shlex.quote(str(path))
         console.print(
