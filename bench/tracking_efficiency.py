@@ -120,8 +120,9 @@ def _study(args: argparse.Namespace, window: Window, folder: Path) -> None:
     """Successive halving over the arms, rung by rung, through Optuna's pruner. Runs already in
     the store are cached, so a later sitting with more rungs redoes no training and comes to the
     same verdicts before it goes on."""
+    # Optuna counts steps in whole numbers: thousands of samples.
     pruner = optuna.pruners.SuccessiveHalvingPruner(
-        min_resource=args.rungs[0], reduction_factor=args.eta, min_early_stopping_rate=0
+        min_resource=round(args.rungs[0] * 1000), reduction_factor=args.eta, min_early_stopping_rate=0
     )
     study = optuna.create_study(direction="maximize", pruner=pruner)
     live = {arm: study.ask() for arm in args.arms}
@@ -132,7 +133,7 @@ def _study(args: argparse.Namespace, window: Window, folder: Path) -> None:
             rows = list(pool.map(lambda job: _run(*job), jobs))
         for arm, trial in live.items():
             score[arm] = _mean([row for row in rows if row["arm"] == arm], "train_score_s")
-            trial.report(score[arm], step=rung)
+            trial.report(score[arm], step=round(rung * 1000))
         for arm, trial in list(live.items()):
             if len(live) > 1 and trial.should_prune():
                 study.tell(trial, state=optuna.trial.TrialState.PRUNED)
