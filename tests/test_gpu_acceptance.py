@@ -103,7 +103,7 @@ def test_cuda_with_a_cpu_torch_is_refused_before_warp(monkeypatch: pytest.Monkey
         make_backend("warp", [], threads=1, device="cuda")
     expected = (
         f"train.env.device 'cuda': torch {torch.__version__} has no CUDA: "
-        'install the CUDA build, see README "Training on a GPU"'
+        'install the CUDA build, see docs/training.md "Training on a GPU"'
     )
     assert str(error.value) == expected
 

@@ -35,7 +35,7 @@ def make_backend(name: str, models: list[mujoco.MjModel], threads: int, device: 
         if device.startswith("cuda") and not torch.cuda.is_available():
             raise PipelineError(
                 f"train.env.device '{device}': torch {torch.__version__} has no CUDA: "
-                'install the CUDA build, see README "Training on a GPU"'
+                'install the CUDA build, see docs/training.md "Training on a GPU"'
             )
         # mujoco-warp is an optional extra: imported only when asked for.
         from rd_pipeline.rl.physics.warp import MujocoWarpBackend
