@@ -5,7 +5,7 @@ doubling sample budgets, losing arms stopped at each budget, every frozen checkp
         --seeds 0 1 --rungs 1 2 4 8 [--jobs 2]        # train, prune, validate
     python bench/tracking_efficiency.py --window g1_d1s2 --report   # curves and table only
 
-Each (window, arm, seed) is one pipeline (the `cpu` profile, the arm's overrides, `--seed`),
+Each (window, arm, seed) is one pipeline (`--profile`, `cpu` by default; the arm's overrides; `--seed`),
 grown rung by rung with `--resume`: the training of a rung continues the finished run of the
 rung before, so a curve costs its longest budget only. A rung's checkpoint is the run's last,
 fixed by its budget before anything is looked at; it is exported and validated (nominal and
@@ -53,10 +53,10 @@ class Window:
     clip: str | None = None
     """start:end seconds; None: the median-speed 10 s window."""
 
-    def resolved(self) -> Window:
+    def resolved(self, profile: str) -> Window:
         if self.clip is not None:
             return self
-        whole = workspace.plan(self.robot, self.motion, PROFILE, source=self.source)
+        whole = workspace.plan(self.robot, self.motion, profile, source=self.source)
         workspace.run(whole, until=workspace.providing(whole, "reference"))
         return replace(self, clip=windows.speed_window(whole, 10, 0.5).clip)
 
@@ -69,14 +69,31 @@ WINDOWS = {
 }
 
 
-PROFILE = "cpu"
-
 ARMS: dict[str, tuple[str, ...]] = {
     "paper": (),
     # Initial action noise: the paper's 0.894 times the action scale down to MimicKit's scale.
     "noise_0.5": ("train.ppo.init_noise_std=0.5",),
     "noise_0.3": ("train.ppo.init_noise_std=0.3",),
     "noise_0.1": ("train.ppo.init_noise_std=0.1",),
+    # The untrained residual policy at zero action, a small held noise (MimicKit's G1 tracker).
+    "output_0.01": ("train.ppo.init_output_gain=0.01",),
+    "mimickit_noise": (
+        "train.ppo.init_output_gain=0.01",
+        "train.ppo.init_noise_std=0.05",
+        "train.ppo.learn_noise_std=false",
+    ),
+    # Action scale (the anchors' 0.25 * effort / kp per joint is 0.07-0.55 rad).
+    "action_scale_0.5": ("train.env.actions.scale=0.5",),
+    # The anchors' lenient, height-only end-effector terminations while training.
+    "height_terminations": ("train.env.terminations.motion_far_height_only=true",),
+    # The sampler: uniform segments; failure credited to every visited segment.
+    "sampler_uniform": ("train.sampler.mode=uniform",),
+    "failure_visited": ("train.sampler.failure_credit=visited",),
+    # PPO's update: fewer epochs, a lower learning rate, no entropy bonus, smaller networks.
+    "epochs_2": ("train.ppo.learning_epochs=2",),
+    "lr_3e-4": ("train.ppo.learning_rate=0.0003",),
+    "entropy_0": ("train.ppo.entropy_coef=0.0",),
+    "net_256": ("train.ppo.hidden_dims=256,128,64",),
 }
 """Arm -> its `--set` overrides on the `cpu` profile (each lever of the recipe, one at a time)."""
 
@@ -94,8 +111,8 @@ RESULTS = Path("bench/results/tracking_efficiency")
 
 def main() -> None:
     args = _parser().parse_args()
-    window = WINDOWS[args.window].resolved()
-    folder = RESULTS / args.window
+    window = WINDOWS[args.window].resolved(args.profile)
+    folder = RESULTS / (args.window if args.profile == "cpu" else f"{args.window}_{args.profile}")
     folder.mkdir(parents=True, exist_ok=True)
     if not args.report:
         _study(args, window, folder)
@@ -112,6 +129,9 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--rungs", nargs="+", type=float, default=[1, 2, 4, 8], help="budgets in M samples")
     parser.add_argument("--eta", type=int, default=2, help="1/eta of the arms go on at each rung")
     parser.add_argument("--jobs", type=int, default=2, help="pipelines at once (threads split the cores)")
+    parser.add_argument(
+        "--profile", default="cpu", help="cpu (2-16 cores) or paper (a GPU: --jobs 1, rungs of 10s of M)"
+    )
     parser.add_argument("--report", action="store_true", help="only redraw the table and the curves")
     return parser
 
@@ -148,7 +168,7 @@ def _study(args: argparse.Namespace, window: Window, folder: Path) -> None:
 def _iterations(window: Window, arm: str, rung: float, args: argparse.Namespace) -> tuple[int, int]:
     """(iterations, checkpoint_every) of a rung: whole multiples of the first rung's iterations,
     so every rung is the one before grown (`--resume`) and ends on a checkpoint."""
-    plan = workspace.plan(window.robot, window.motion, PROFILE, overrides=ARMS[arm], source=window.source)
+    plan = workspace.plan(window.robot, window.motion, args.profile, overrides=ARMS[arm], source=window.source)
     per_iteration = plan.pipeline.params["train"].samples_per_iteration
     first = round(args.rungs[0] * 1e6 / per_iteration)
     return first * round(rung / args.rungs[0]), first
@@ -171,13 +191,13 @@ def _run(window: Window, arm: str, seed: int, rung: float, args: argparse.Namesp
     """Train (growing the rung before), export and validate one arm and seed at one budget."""
     sets = _sets(window, arm, rung, args)
     take = ("--robot", window.robot, "--motion", window.motion, "--source", window.source)
-    command = [sys.executable, "-m", "rd_pipeline", "run", *take, "--profile", PROFILE, "--seed", str(seed)]
+    command = [sys.executable, "-m", "rd_pipeline", "run", *take, "--profile", args.profile, "--seed", str(seed)]
     env = {**os.environ, "OMP_NUM_THREADS": str(max(1, (os.cpu_count() or 1) // args.jobs))}
     print(f"{arm} seed {seed}: {rung:g} M samples", flush=True)
     done = subprocess.run([*command, "--resume", "--set", *sets], env=env, capture_output=True, text=True)
     if done.returncode:
         raise SystemExit(f"{arm} seed {seed} at {rung:g} M: {done.stderr.strip().splitlines()[-1]}")
-    plan = workspace.plan(window.robot, window.motion, PROFILE, overrides=sets, seed=seed, source=window.source)
+    plan = workspace.plan(window.robot, window.motion, args.profile, overrides=sets, seed=seed, source=window.source)
     return _row(plan, arm, seed, rung)
 
 

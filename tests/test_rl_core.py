@@ -17,6 +17,8 @@ from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
 from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.rl.events import rsi_state
 from rd_pipeline.rl.physics import MujocoCpuBackend
+from rd_pipeline.rl.ppo import MultiHeadPPO, build_ppo
+from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.rl.reward_terms import PenaltyTerm, TermContext, TrackingState
 from rd_pipeline.rl.rewards import GROUPS, AdaptiveSigma, RewardManager, RewardsConfig
 from rd_pipeline.rl.sim_model import simulation_model
@@ -404,3 +406,33 @@ def test_rsi_perturbs_the_root_angular_velocity_by_its_noise() -> None:
     assert torch.equal(still[:, 3:6], still[:1, 3:6].expand(4000, 3))
     spread = (shaken[:, 3:6] - still[:, 3:6]).std(dim=0)
     assert torch.allclose(spread, torch.full((3,), 0.01, dtype=spread.dtype), rtol=0.1)
+
+
+def _tiny_ppo(**changes) -> MultiHeadPPO:
+    from tensordict import TensorDict
+
+    torch.manual_seed(0)
+    obs = TensorDict({"policy": torch.randn(8, 12), "critic": torch.randn(8, 15)}, batch_size=[8])
+    return build_ppo(obs, 8, 5, 2, PpoConfig(steps_per_env=4, hidden_dims=(16, 16), **changes))
+
+
+def test_a_small_output_gain_starts_near_zero_action_and_a_held_noise_std_stays() -> None:
+    from tensordict import TensorDict
+
+    obs = TensorDict({"policy": torch.randn(32, 12), "critic": torch.randn(32, 15)}, batch_size=[32])
+    paper = _tiny_ppo()
+    small = _tiny_ppo(init_output_gain=0.01, learn_noise_std=False, init_noise_std=0.05)
+    paper_mean = paper.actor(obs, stochastic_output=False)
+    small_mean = small.actor(obs, stochastic_output=False)
+    # Same seed, same hidden layers: the output layer is the paper's times 0.01, without its bias.
+    assert small_mean.abs().max() < 0.02 * paper_mean.abs().max()
+    # A step of the optimizer on a loss through the std moves the learned std, not the held one.
+    for ppo, learned in ((paper, True), (small, False)):
+        actions = ppo.actor(obs, stochastic_output=True)
+        before = ppo.actor.output_std.detach().clone()
+        loss = -ppo.actor.get_output_log_prob(actions).mean() - ppo.actor.output_entropy.mean()
+        ppo.optimizer.zero_grad()
+        loss.backward()
+        ppo.optimizer.step()
+        ppo.actor(obs, stochastic_output=True)
+        assert torch.equal(ppo.actor.output_std, before) != learned

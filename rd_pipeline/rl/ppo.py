@@ -88,8 +88,14 @@ def build_ppo(
         list(config.hidden_dims),
         "relu",
         obs_normalization=True,
-        distribution_cfg={"class_name": "GaussianDistribution", "init_std": config.init_noise_std},
+        distribution_cfg={
+            "class_name": "GaussianDistribution",
+            "init_std": config.init_noise_std,
+            "learn_std": config.learn_noise_std,
+        },
     )
+    if config.init_output_gain != 1.0:
+        _scale_output_layer(actor, config.init_output_gain)
     critic = MLPModel(obs, groups, "critic", heads, list(config.hidden_dims), "relu", obs_normalization=True)
     storage = MultiHeadRolloutStorage(num_envs, config.steps_per_env, obs, num_actions, heads, device)
     ppo = MultiHeadPPO(
@@ -113,3 +119,12 @@ def build_ppo(
     if ranks.distributed:
         ppo.broadcast_parameters()
     return ppo
+
+
+def _scale_output_layer(actor: MLPModel, gain: float) -> None:
+    """Scale the actor's last linear layer by `gain` and zero its bias: the mean action starts
+    near zero, which for a residual policy is the reference's own controller."""
+    last = [module for module in actor.mlp.modules() if isinstance(module, torch.nn.Linear)][-1]
+    with torch.no_grad():
+        last.weight.mul_(gain)
+        last.bias.zero_()

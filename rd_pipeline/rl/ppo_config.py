@@ -35,6 +35,13 @@ class PpoConfig:
     """Target KL of the adaptive schedule."""
     init_noise_std: float = 0.894
     """Initial action-noise std (variance 0.8)."""
+    learn_noise_std: bool = True
+    """Whether the action-noise std is learned (the paper) or held at `init_noise_std` (MimicKit's
+    G1 tracker holds 0.05)."""
+    init_output_gain: float = 1.0
+    """Factor on the actor's output layer at initialization, its bias zeroed unless 1: near 0 the
+    untrained residual policy starts at zero action, the reference's own controller (MimicKit
+    starts its output layer at scale 0.01)."""
     hidden_dims: tuple[int, ...] = (512, 256, 128)
     """Actor and critic MLP widths (ReLU)."""
     mixed_precision: bool = False
@@ -52,5 +59,6 @@ class PpoConfig:
             "max_grad_norm",
             "desired_kl",
             "init_noise_std",
+            "init_output_gain",
         )
         require_at_most(self, 1.0, "gamma", "lam")
