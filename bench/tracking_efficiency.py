@@ -285,8 +285,25 @@ def _table(rows: list[dict[str, Any]], path: Path) -> None:
     lines += [
         "",
         f"Bar (nominal start-zero >= 9.5 s and fixed-grid mean >= 4.5 s on every seed): {', '.join(met) or 'not met'}",
+        "",
+        "What each rung's verdict cost (every run's training up to that budget, at its median iteration):",
+        "",
+        *_costs(rows),
     ]
     path.write_text("\n".join(lines) + "\n")
+
+
+def _costs(rows: list[dict[str, Any]]) -> list[str]:
+    """Per rung: the arms judged there and the machine hours every run had cost up to it."""
+    lines = []
+    for rung in sorted({row["rung_m"] for row in rows}):
+        so_far: dict[tuple[str, int], dict[str, Any]] = {}
+        for row in sorted((row for row in rows if row["rung_m"] <= rung), key=lambda row: row["rung_m"]):
+            so_far[(row["arm"], row["seed"])] = row  # a run's hours grow with its budget
+        hours = sum(row["wall_h_at_median_iteration"] for row in so_far.values())
+        arms = len({row["arm"] for row in rows if row["rung_m"] == rung})
+        lines.append(f"- {rung:g} M samples: {arms} arms judged, {hours:.2f} h of the machine so far")
+    return lines
 
 
 def _curves(rows: list[dict[str, Any]], window: Window, path: Path) -> None:
