@@ -34,7 +34,9 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     # The last iteration is always a scored checkpoint, so there is a best one.
     best = best_held(ctx.out_dir, rows=rows)
     assert best is not None
-    _plot(rows, best, outcome, ctx.out_dir)
+    stretch = f"{config.clip} s" if config.clip else "the whole take"
+    title = f"{ctx.robot} {ctx.motion}, {stretch}, {config.iterations} iterations"
+    _plot(rows, best, outcome, ctx.out_dir, title)
     return {
         **training_metrics(rows, outcome, config, best),
         "continued_from": continued_from(ctx.out_dir),
@@ -98,14 +100,14 @@ def _into_artifact(work: Path, out_dir: Path) -> list[dict]:
     return rows
 
 
-def _plot(rows: list[dict], best: dict, outcome: TrainingOutcome, out_dir: Path) -> None:
+def _plot(rows: list[dict], best: dict, outcome: TrainingOutcome, out_dir: Path, title: str) -> None:
     """The learning curve and the sampler's failure profile, beside the checkpoints."""
     from rd_pipeline.rl.plots import plot_learning_curve
     from rd_pipeline.sampling.plots import plot_sampler_profile
 
-    plot_learning_curve(rows, best, out_dir / CURVE_FILE)
+    plot_learning_curve(rows, best, out_dir / CURVE_FILE, title)
     uniform = 1 / len(outcome.failure_rate)
-    plot_sampler_profile(outcome.failure_rate, outcome.probabilities, uniform, out_dir / PROFILE_FILE)
+    plot_sampler_profile(outcome.failure_rate, outcome.probabilities, uniform, out_dir / PROFILE_FILE, title)
 
 
 def _longest_shorter_run(runs: tuple[ArtifactRef, ...], iterations: int) -> ShorterRun | None:

@@ -241,22 +241,30 @@ def plot_report(report: dict, out_dir: Path) -> None:
         ax.fill_between(x, [b["ci_low"] for b in bins], [b["ci_high"] for b in bins], color=colors[name], alpha=0.2)
     ax.set_xlabel("relative time bin")
     ax.set_ylabel("E_g_mpbpe (mm)")
+    ax.set_title(f"{_who(report)}\nbody position error over the rollout, nominal physics", fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(out_dir / DRIFT_PLOT, dpi=110)
     plt.close(fig)
 
-    fig, ax = plt.subplots(figsize=(6.5, 3.2))
-    width = 0.4
-    for offset, name in zip((-width / 2, width / 2), CONTROLLERS):
+    # Points, not bars: a few seconds of survival at starts spread over minutes of take.
+    fig, ax = plt.subplots(figsize=(6.5, 3.4))
+    for name in CONTROLLERS:
         per_start = report["nominal"][name]["per_start"]
-        starts = [s + offset for s in per_start["start_s"]]
-        ax.bar(starts, per_start["survival_s"], width=width, color=colors[name], label=name)
+        ax.plot(per_start["start_s"], per_start["survival_s"], "o-", color=colors[name], label=name, ms=4, lw=1)
     most = report["nominal"]["policy"]["per_start"]
+    longest = max(max(report["nominal"][name]["per_start"]["survival_s"]) for name in CONTROLLERS)
     ax.plot(most["start_s"], most["most_s"], ":", color="black", label="to the clip's end")
+    ax.set_ylim(0, 1.25 * max(longest, 0.1))
     ax.set_xlabel("start time (s)")
     ax.set_ylabel("survival (s)")
-    ax.legend(fontsize=8)
+    ax.set_title(f"{_who(report)}\nsurvival from each fixed-grid start, nominal physics", fontsize=9)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     fig.savefig(out_dir / SURVIVAL_PLOT, dpi=110)
     plt.close(fig)
+
+
+def _who(report: dict) -> str:
+    """The plots' first title line: robot, motion and policy."""
+    return f"{report['robot']} {report['motion']}, policy {report['policy_key']}"

@@ -55,18 +55,24 @@ def plot_balancing(stats: SegmentStats, prior: BalancedPrior, path: Path) -> Non
     plt.close(fig)
 
 
-def plot_sampler_profile(failure_rate: np.ndarray, probability: np.ndarray, uniform: float, path: Path) -> None:
+def plot_sampler_profile(
+    failure_rate: np.ndarray, probability: np.ndarray, uniform: float, path: Path, title: str = ""
+) -> None:
     """Failure-aware sampling profile: EMA failure rate and sampling probability per segment."""
     segments = np.arange(len(failure_rate))
-    fig, ax = plt.subplots(figsize=(10, 3))
+    fig, ax = plt.subplots(figsize=(10, 3.4))
     ax.bar(segments, failure_rate, color="tab:orange", alpha=0.6, label="EMA failure rate")
+    ax.set_ylim(0, max(1e-3, float(failure_rate.max())) * 1.1)  # a rate is never negative
     ax.set_xlabel("segment (1 s)")
     ax.set_ylabel("failure rate")
     twin = ax.twinx()
     twin.plot(segments, probability, color="tab:blue", lw=1.2, label="sampling probability")
     twin.axhline(uniform, color="gray", ls="--", lw=0.8, label="uniform")
+    twin.set_ylim(0, max(float(probability.max()), uniform) * 1.1)
     twin.set_ylabel("probability")
-    fig.legend(loc="upper right", fontsize=7)
-    fig.tight_layout()
+    ax.set_title(f"{title}\nfailure-aware sampling at the end of training" if title else "failure-aware sampling")
+    # Below the axes, where it covers neither bars nor ticks.
+    fig.legend(loc="lower center", ncol=3, fontsize=7)
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
     fig.savefig(path, dpi=110)
     plt.close(fig)
