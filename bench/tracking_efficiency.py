@@ -9,14 +9,13 @@ Each (window, arm, seed) is one pipeline (`--profile`, `cpu` by default; the arm
 grown rung by rung with `--resume`: the training of a rung continues the finished run of the
 rung before, so a curve costs its longest budget only. A rung's checkpoint is the run's last,
 fixed by its budget before anything is looked at; it is exported and validated (nominal and
-randomized physics, `VALIDATE`). Which arms go on is decided by Optuna's successive-halving
-pruner on train's own score at that checkpoint (start-zero survival on randomized physics from
-a seed of its own, mean over seeds), never on the validation figures this bench reports. The
-rungs are run in lock-step: every live arm reports a rung before any is judged, so each is
-judged against the whole rung.
+randomized physics, `VALIDATE`). Which arms go on is decided by synchronous successive halving:
+after every live arm has run a rung, the best 1/eta by train's own score at that checkpoint
+(start-zero survival on randomized physics from a seed of its own, mean over seeds) go on, never
+by the validation figures this bench reports.
 
 Writes `bench/results/tracking_efficiency/<window>/`: `runs/<arm>_seed<k>_<M>M.json` (samples,
-hours, train's score, the validation's figures, the verdict, the train and validate keys, the
+hours, train's score, the validation's figures, the train and validate keys, the
 commit), `curves.png` and `table.md`.
 """
 
@@ -32,7 +31,6 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-import optuna
 from provenance import head_commit
 from training_hours import training_hours
 
@@ -117,7 +115,7 @@ def main() -> None:
     if not args.report:
         _study(args, window, folder)
     rows = _rows(folder)
-    _table(rows, folder / "table.md")
+    _table(rows, folder / "table.md", args.eta)
     _curves(rows, window, folder / "curves.png")
 
 
@@ -137,32 +135,25 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _study(args: argparse.Namespace, window: Window, folder: Path) -> None:
-    """Successive halving over the arms, rung by rung, through Optuna's pruner. Runs already in
-    the store are cached, so a later sitting with more rungs redoes no training and comes to the
-    same verdicts before it goes on."""
-    # Optuna counts steps in whole numbers: thousands of samples.
-    pruner = optuna.pruners.SuccessiveHalvingPruner(
-        min_resource=round(args.rungs[0] * 1000), reduction_factor=args.eta, min_early_stopping_rate=0
-    )
-    study = optuna.create_study(direction="maximize", pruner=pruner)
-    live = {arm: study.ask() for arm in args.arms}
-    score: dict[str, float] = {}
+    """Synchronous successive halving over the arms, rung by rung. Runs already in the store are
+    cached, so a later sitting with more rungs redoes no training and comes to the same verdicts
+    before it goes on."""
+    live = list(args.arms)
     for rung in args.rungs:
         jobs = [(window, arm, seed, rung, args) for arm in live for seed in args.seeds]
         with ThreadPoolExecutor(args.jobs) as pool:
             rows = list(pool.map(lambda job: _run(*job), jobs))
-        for arm, trial in live.items():
-            score[arm] = _mean([row for row in rows if row["arm"] == arm], "train_score_s")
-            trial.report(score[arm], step=round(rung * 1000))
-        for arm, trial in list(live.items()):
-            if len(live) > 1 and trial.should_prune():
-                study.tell(trial, state=optuna.trial.TrialState.PRUNED)
-                del live[arm]
-                for row in rows:
-                    row["verdict"] = f"stopped at {rung:g} M" if row["arm"] == arm else row.get("verdict", "")
         _record(folder, rows)
-    for arm, trial in live.items():
-        study.tell(trial, score[arm])
+        live = sorted(_survivors(rows, args.eta))
+
+
+def _survivors(rows: list[dict[str, Any]], eta: int) -> set[str]:
+    """The arms of one rung that go on: the best 1/eta (at least one) by train's score, the mean
+    over seeds. Every arm is judged against the whole rung (Optuna's successive-halving pruner is
+    asynchronous: the first arm it judges at a rung always goes on, which made it unfit here)."""
+    by_arm = {arm: [row for row in rows if row["arm"] == arm] for arm in {row["arm"] for row in rows}}
+    ranked = sorted(by_arm, key=lambda arm: _mean(by_arm[arm], "train_score_s"), reverse=True)
+    return set(ranked[: max(1, len(ranked) // eta)])
 
 
 def _iterations(window: Window, arm: str, rung: float, args: argparse.Namespace) -> tuple[int, int]:
@@ -257,7 +248,15 @@ def _mean(rows: list[dict[str, Any]], field: str) -> float:
     return sum(row[field] for row in rows) / len(rows)
 
 
-def _table(rows: list[dict[str, Any]], path: Path) -> None:
+def _verdict(rows: list[dict[str, Any]], arm: str, rung: float, eta: int) -> str:
+    """Whether `arm` went on from `rung`, judged against every arm of the rung."""
+    at_rung = [row for row in rows if row["rung_m"] == rung]
+    if len({row["arm"] for row in at_rung}) < 2:
+        return ""
+    return "goes on" if arm in _survivors(at_rung, eta) else "stopped"
+
+
+def _table(rows: list[dict[str, Any]], path: Path, eta: int) -> None:
     """Per arm and budget: the seeds' mean figures, hours, train's score and the verdict."""
     fields = ("nominal_start_zero_s", "nominal_mean_s", "randomized_start_zero_s", "randomized_mean_s")
     lines = [
@@ -270,7 +269,7 @@ def _table(rows: list[dict[str, Any]], path: Path) -> None:
         for rung, seeds in sorted(rungs.items()):
             figures = " | ".join(f"{_mean(seeds, field):.2f}" for field in fields)
             hours = sum(row["wall_h"] for row in seeds)
-            verdict = next((row["verdict"] for row in seeds if row.get("verdict")), "")
+            verdict = _verdict(rows, arm, rung, eta)
             zero = _mean(seeds, "nominal_zero_action_mean_s")
             score = _mean(seeds, "train_score_s")
             lines.append(
