@@ -1,6 +1,6 @@
 """Benchmark: wall time of a cached `rd-pipeline run --until parse` (the issue's bar: under 1 s).
 
-    python bench/cli_startup.py [--repeats 7] [--out bench/results/cli_startup.json]
+    python -m bench.cli_startup [--repeats 7] [--out bench/results/cli_startup.json]
 
 Runs the installed `rd-pipeline` entry point as a user would, in a temporary artifact store whose
 parse artifact is computed first; reports the median and every run.

@@ -3,7 +3,7 @@ from Python threads, 500 Hz), the `cpu` profile's path (fitted primitives, batch
 500 Hz), and the fast path (the same at mjlab's 200 Hz with Newton 10/20, alone and as `--ranks`
 data-parallel processes), in one run, interleaved.
 
-    python bench/env_throughput.py [--robot g1] [--envs 128] [--threads 2] [--repeats 5] [--ranks 2]
+    python -m bench.env_throughput [--robot g1] [--envs 128] [--threads 2] [--repeats 5] [--ranks 2]
         [--out bench/results/env_throughput.json]
 
 For each path: env physics steps/s with a zero policy (env steps x decimation); raw batched

@@ -1,7 +1,7 @@
 """Benchmark: one inference step of an exported policy at batch 1 on one core, TorchScript
 (`policy.pt`) and ONNX on onnxruntime (`policy.onnx`) side by side.
 
-    python bench/export.py --policy artifacts/export/g1/dance1_subject2/<key> [--out bench/results/export.json]
+    python -m bench.export --policy artifacts/export/g1/dance1_subject2/<key> [--out bench/results/export.json]
 
 The two runtimes alternate in blocks of 100 calls (2000 timed calls each after 200 warm-up calls),
 so both see the same machine load. Reports the median and 99th percentile of each and their

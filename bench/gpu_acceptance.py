@@ -1,6 +1,6 @@
 """Acceptance of the GPU path: MuJoCo Warp physics, the tracking environment and PPO on one device.
 
-    python bench/gpu_acceptance.py [--device cuda] [--envs 1024 4096 8192] [--steps 1000]
+    python -m bench.gpu_acceptance [--device cuda] [--envs 1024 4096 8192] [--steps 1000]
         [--iterations 20] [--out bench/results/gpu_acceptance.json]
 
 One command for a GPU machine; on Warp's CPU device it runs at a few environments
@@ -80,7 +80,7 @@ def main(argv: list[str] | None = None) -> dict:
     robot = load_robot(args.robot)
     reference = _reference(robot, args.motion)
     result = {
-        "command": "python bench/gpu_acceptance.py " + " ".join(sys.argv[1:] if argv is None else argv),
+        "command": "python -m bench.gpu_acceptance " + " ".join(sys.argv[1:] if argv is None else argv),
         "device": args.device,
         "robot": args.robot,
         "motion": args.motion,

@@ -1,6 +1,6 @@
 """Benchmark: deterministic start-zero survival of trained checkpoints against the zero-action policy.
 
-    python bench/learning.py --robot g1 --motion dance1_subject2 --profile cpu --clip 0:10 \
+    python -m bench.learning --robot g1 --motion dance1_subject2 --profile cpu --clip 0:10 \
         --checkpoints DIR [--set stage.param=value ...] [--out bench/results/learning.json]
 
 Rebuilds the training environment (robot, reference clip and the profile's settings, resolved by

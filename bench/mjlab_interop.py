@@ -1,6 +1,6 @@
 """Benchmark: does mjlab's own `MotionLoader` read what `export-motion --format mjlab` writes?
 
-    python bench/mjlab_interop.py --mjlab-python /path/to/mjlab-venv/bin/python [--motion dance1_subject2]
+    python -m bench.mjlab_interop --mjlab-python /path/to/mjlab-venv/bin/python [--motion dance1_subject2]
 
 mjlab 1.6 pins rsl-rl-lib 5.4.2 and mujoco 3.11, this project rsl-rl-lib 5.5 and mujoco 4, so mjlab
 cannot share the project's environment (nor be one of its extras). Give it a venv of its own:

@@ -1,6 +1,6 @@
 """Benchmark: BVH parse + forward kinematics of a LAFAN1 dance on one core, and a CLI cache hit.
 
-    python bench/parse.py [--repeats 15] [--out bench/results/parse.json]
+    python -m bench.parse [--repeats 15] [--out bench/results/parse.json]
 
 Reports medians. The issue's bar: parse + FK of the 3945-frame dance in at most 0.5 s; a cache hit
 of `rd-pipeline run --until parse` in under 2 s.

@@ -1,6 +1,6 @@
 """Benchmark: our retargeting on every shared LAFAN1 take and robot, beside the dataset CSVs, one ruler.
 
-    python bench/retarget.py [--robots g1 g1_29dof h1 h1_2] [--motions dance1_subject1 ...] [--jobs 2] [--resume]
+    python -m bench.retarget [--robots g1 g1_29dof h1 h1_2] [--motions dance1_subject1 ...] [--jobs 2] [--resume]
                              [--tempo 1.0] [--out bench/results/retarget]
 
 For each (robot, take): retarget the BVH with the stage's default params, one take per core
@@ -30,8 +30,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
-from result_files import write_result
 
+from bench.common import write_result
 from rd_pipeline import paths
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh

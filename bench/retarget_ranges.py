@@ -1,6 +1,6 @@
 """Benchmark: how much of each robot's retarget misses its joint ranges explain.
 
-    python bench/retarget_ranges.py [--robots g1 h1 h1_2] [--motions dance1_subject1 ...] [--widen-rad 0.5]
+    python -m bench.retarget_ranges [--robots g1 h1 h1_2] [--motions dance1_subject1 ...] [--widen-rad 0.5]
                                     [--jobs 2] [--resume] [--out bench/results/retarget_ranges]
 
 Each (robot, take) is retargeted with the stage's default params on the robot's own model and on
@@ -30,8 +30,7 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from retarget import in_take_order, pending, resume_log, retarget_and_score, shared_takes  # bench/retarget.py
-
+from bench.retarget import in_take_order, pending, resume_log, retarget_and_score, shared_takes
 from rd_pipeline import paths
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, human_motion_from_bvh

@@ -1,6 +1,6 @@
 """Benchmark: retarget speed of two checkouts side by side, alone on one core, takes interleaved.
 
-    python bench/retarget_speed.py --trees /path/to/baseline . [--robot g1] [--motions ...] [--rounds 2]
+    python -m bench.retarget_speed --trees /path/to/baseline . [--robot g1] [--motions ...] [--rounds 2]
                                    [--core 0] [--out bench/results/retarget_speed]
 
 On a shared machine the speed of one take moves by 10 % or more between runs minutes apart, so
@@ -20,8 +20,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from result_files import write_result
-from retarget import shared_takes
+from bench.common import write_result
+from bench.retarget import shared_takes
 
 ONE_TAKE = """
 import sys, time

@@ -1,6 +1,6 @@
 """Benchmark: the CVXPY prior solve at 500 segments x 4 joints x 20 bins, and a failure-aware sampling profile.
 
-    python bench/sampling.py [--repeats 7] [--out bench/results/sampling.json]
+    python -m bench.sampling [--repeats 7] [--out bench/results/sampling.json]
 
 The issue's bar: the 500 x 4 x 20 solve in under 1 s (construction + solve, median). The profile
 plot feeds the sampler a synthetic failure pattern (segments fail with a probability that rises

@@ -1,9 +1,9 @@
 """Benchmark: samples to dance. Arms of the PPO recipe trained side by side on dance windows to
 doubling sample budgets, losing arms stopped at each budget, every frozen checkpoint validated.
 
-    python bench/tracking_efficiency.py --window g1_d1s2 --arms paper noise_0.5 noise_0.3 noise_0.1 \\
+    python -m bench.tracking_efficiency --window g1_d1s2 --arms paper noise_0.5 noise_0.3 noise_0.1 \\
         --seeds 0 1 --rungs 1 2 4 8 [--jobs 2]        # train, prune, validate
-    python bench/tracking_efficiency.py --window g1_d1s2 --report   # curves and table only
+    python -m bench.tracking_efficiency --window g1_d1s2 --report   # curves and table only
 
 Each (window, arm, seed) is one pipeline (`--profile`, `cpu` by default; the arm's overrides; `--seed`),
 grown rung by rung with `--resume`: the training of a rung continues the finished run of the
@@ -31,9 +31,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from provenance import head_commit
-from training_hours import training_hours
-
+from bench.common import head_commit, training_hours
 from rd_pipeline.api import windows, workspace
 from rd_pipeline.evaluation.validation_report import ValidationReport
 from rd_pipeline.rl.training_log import read_training_log
@@ -60,7 +58,7 @@ class Window:
 
 
 WINDOWS = {
-    # The window of the earlier studies (bench/results/dance_window*.json).
+    # The window of the earlier studies (studies/results/dance_window*.json).
     "g1_d1s2": Window("g1", "dance1_subject2", "bvh", "11:21"),
     "g1_d1s3": Window("g1", "dance1_subject3", "bvh"),
     "h1_2_d1s1": Window("h1_2", "dance1_subject1", "bvh"),

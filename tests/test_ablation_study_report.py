@@ -1,4 +1,4 @@
-"""`bench/ablation_study.py` renders its committed results again as the tables it wrote, and a
+"""`studies/ablation_study.py` renders its committed results again as the tables it wrote, and a
 study whose trials kept no failure EMA gets no EMA table."""
 
 from __future__ import annotations
@@ -9,16 +9,16 @@ import sys
 import pytest
 from conftest import PROJECT
 
-RESULTS = PROJECT / "bench" / "results"
+RESULTS = PROJECT / "studies" / "results"
 
 
 @pytest.fixture(scope="module")
 def markdown():
-    sys.path.insert(0, str(PROJECT / "bench"))
+    sys.path.insert(0, str(PROJECT))
     try:
-        from ablation_study import markdown
+        from studies.ablation_study import markdown
     finally:
-        sys.path.remove(str(PROJECT / "bench"))
+        sys.path.remove(str(PROJECT))
     return markdown
 
 

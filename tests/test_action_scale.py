@@ -1,4 +1,4 @@
-"""`bench/action_scale.py` rolls a trained checkpoint out with its outputs scaled: at scale 1 from
+"""`studies/action_scale.py` rolls a trained checkpoint out with its outputs scaled: at scale 1 from
 start 0 it survives exactly as long as the training scored that checkpoint, and a checkpoint
 whose outputs are pushed far off ends sooner at scale 1 than at scale 0, as zero output does
 with the actor's noise widened far."""
@@ -22,9 +22,9 @@ CLIP = "11:13"
 
 
 def _scale(out: Path, *extra: str) -> subprocess.CompletedProcess:
-    script = str(PROJECT / "bench" / "action_scale.py")
+    script = [sys.executable, "-m", "studies.action_scale"]
     args = ["--profile", "smoke", "--clip", CLIP, "--iterations", "2", "--set", *SETS, "--out", str(out), *extra]
-    return subprocess.run([sys.executable, script, *args], capture_output=True, text=True, cwd=PROJECT)
+    return subprocess.run([*script, *args], capture_output=True, text=True, cwd=PROJECT)
 
 
 def _survival(out: Path, checkpoint: int, *joints: str) -> dict[str, list[float]]:

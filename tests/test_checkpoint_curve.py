@@ -1,4 +1,4 @@
-"""`bench/checkpoint_curve.py` lays checkpoints chosen by iteration in iteration order, each with
+"""`studies/checkpoint_curve.py` lays checkpoints chosen by iteration in iteration order, each with
 its training-model score beside its mesh figures, and refuses a checkpoint the run never scored."""
 
 from __future__ import annotations
@@ -10,15 +10,15 @@ from pathlib import Path
 
 from conftest import PROJECT
 
-SCRIPT = str(PROJECT / "bench" / "checkpoint_curve.py")
-CHECKPOINTS = PROJECT / "bench" / "results" / "dance_window_h1_2_visited_checkpoints"
+SCRIPT = [sys.executable, "-m", "studies.checkpoint_curve"]
+CHECKPOINTS = PROJECT / "studies" / "results" / "dance_window_h1_2_visited_checkpoints"
 
 
 def test_checkpoints_read_in_iteration_order_with_both_models_figures(tmp_path: Path) -> None:
     given = [CHECKPOINTS / "checkpoint_36000.json", CHECKPOINTS / "checkpoint_35000.json"]
     out = tmp_path / "curve"
     written = subprocess.run(
-        [sys.executable, SCRIPT, *map(str, given), "--out", str(out)], capture_output=True, text=True
+        [*SCRIPT, *map(str, given), "--out", str(out)], capture_output=True, text=True, cwd=PROJECT
     )
     assert written.returncode == 0, written.stderr
     peak, last = json.loads(out.with_suffix(".json").read_text())
@@ -41,7 +41,7 @@ def test_a_checkpoint_the_run_never_scored_is_one_line(tmp_path: Path) -> None:
     odd = tmp_path / "checkpoint_36050.json"
     odd.write_text(json.dumps(result))
     refused = subprocess.run(
-        [sys.executable, SCRIPT, str(odd), "--out", str(tmp_path / "curve")], capture_output=True, text=True
+        [*SCRIPT, str(odd), "--out", str(tmp_path / "curve")], capture_output=True, text=True, cwd=PROJECT
     )
     assert refused.returncode == 1
     assert refused.stderr.strip().splitlines() == [

@@ -94,7 +94,7 @@ def test_best_by_completion_picks_the_checkpoint_that_lasts_from_the_clips_middl
     import gzip
     import shutil
 
-    with gzip.open(PROJECT / "bench" / "results" / "dance_window_state" / "training_log.jsonl.gz") as packed:
+    with gzip.open(PROJECT / "studies" / "results" / "dance_window_state" / "training_log.jsonl.gz") as packed:
         with open(tmp_path / "training_log.jsonl", "wb") as log:
             shutil.copyfileobj(packed, log)
     # The saved state grows with the run; these are the choices over its first 43,000 iterations.

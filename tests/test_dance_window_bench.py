@@ -1,4 +1,4 @@
-"""`bench/dance_window.py` trains, exports and validates a window of a take from the source it is
+"""`studies/dance_window.py` trains, exports and validates a window of a take from the source it is
 told to use, and writes the result file issue 31 asks for; a source the take lacks is one line."""
 
 from __future__ import annotations
@@ -11,14 +11,14 @@ from pathlib import Path
 import pytest
 from conftest import LAFAN_DIR, PROJECT
 
-SCRIPT = str(PROJECT / "bench" / "dance_window.py")
+SCRIPT = [sys.executable, "-m", "studies.dance_window"]
 
 
 @pytest.mark.slow
 def test_a_smoke_window_from_the_dataset_csv_writes_the_result_file(artifacts: Path, tmp_path: Path) -> None:
     out = tmp_path / "window.json"
     args = ["--source", "csv", "--clip", "11:13", "--profile", "smoke", "--iterations", "2", "--out", str(out)]
-    measured = subprocess.run([sys.executable, SCRIPT, *args], capture_output=True, text=True, cwd=PROJECT)
+    measured = subprocess.run([*SCRIPT, *args], capture_output=True, text=True, cwd=PROJECT)
     assert measured.returncode == 0, measured.stderr
     result = json.loads(out.read_text())
     chosen = (result["robot"], result["motion"], result["clip"], result["source"])
@@ -37,7 +37,7 @@ def test_a_smoke_window_from_the_dataset_csv_writes_the_result_file(artifacts: P
 def test_a_source_the_take_lacks_is_one_line_and_no_result(artifacts: Path, tmp_path: Path) -> None:
     out = tmp_path / "window.json"
     args = ["--robot", "h1_2", "--motion", "dance2_subject4", "--source", "bvh", "--clip", "0:2", "--out", str(out)]
-    refused = subprocess.run([sys.executable, SCRIPT, *args], capture_output=True, text=True, cwd=PROJECT)
+    refused = subprocess.run([*SCRIPT, *args], capture_output=True, text=True, cwd=PROJECT)
     assert refused.returncode == 1
     bvh = LAFAN_DIR / "dance2_subject4.bvh"
     has = "'dance2_subject4' has: csv:g1, csv:h1, csv:h1_2"

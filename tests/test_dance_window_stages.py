@@ -1,4 +1,4 @@
-"""`bench/dance_window_stages.py` lays scored stages side by side as their result files say, and a
+"""`studies/dance_window_stages.py` lays scored stages side by side as their result files say, and a
 result file that is not there is one line."""
 
 from __future__ import annotations
@@ -10,15 +10,15 @@ from pathlib import Path
 
 from conftest import PROJECT
 
-SCRIPT = str(PROJECT / "bench" / "dance_window_stages.py")
-RESULTS = PROJECT / "bench" / "results"
+SCRIPT = [sys.executable, "-m", "studies.dance_window_stages"]
+RESULTS = PROJECT / "studies" / "results"
 
 
 def test_the_h1_2_stages_read_as_their_result_files_say(tmp_path: Path) -> None:
     stages = [RESULTS / "dance_window_h1_2_median_24000.json", RESULTS / "dance_window_h1_2_visited_8000.json"]
     out = tmp_path / "stages"
     written = subprocess.run(
-        [sys.executable, SCRIPT, *map(str, stages), "--out", str(out)], capture_output=True, text=True
+        [*SCRIPT, *map(str, stages), "--out", str(out)], capture_output=True, text=True, cwd=PROJECT
     )
     assert written.returncode == 0, written.stderr
     start_credit, visited = json.loads(out.with_suffix(".json").read_text())
@@ -44,7 +44,7 @@ def test_the_h1_2_stages_read_as_their_result_files_say(tmp_path: Path) -> None:
 def test_a_missing_result_is_one_line(tmp_path: Path) -> None:
     missing = tmp_path / "gone.json"
     refused = subprocess.run(
-        [sys.executable, SCRIPT, str(missing), "--out", str(tmp_path / "stages")], capture_output=True, text=True
+        [*SCRIPT, str(missing), "--out", str(tmp_path / "stages")], capture_output=True, text=True, cwd=PROJECT
     )
     assert refused.returncode == 1
     assert refused.stderr.strip().splitlines() == [f"error: [Errno 2] No such file or directory: '{missing}'"]

@@ -1,4 +1,4 @@
-"""`bench/footing.py` builds one take both ways and counts the seconds each stands on a tilted foot:
+"""`studies/footing.py` builds one take both ways and counts the seconds each stands on a tilted foot:
 this project's retarget lays H1-2's planted feet flat where the dataset CSV keeps the tilt."""
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from conftest import PROJECT
 
 @pytest.mark.slow
 def test_the_retarget_stands_flatter_than_the_dataset(artifacts: Path, tmp_path: Path) -> None:
-    script = str(PROJECT / "bench" / "footing.py")
+    script = [sys.executable, "-m", "studies.footing"]
     args = ["--robots", "h1_2", "--motions", "dance1_subject2", "--out", str(tmp_path / "footing")]
-    measured = subprocess.run([sys.executable, script, *args], capture_output=True, text=True, cwd=PROJECT)
+    measured = subprocess.run([*script, *args], capture_output=True, text=True, cwd=PROJECT)
     assert measured.returncode == 0, measured.stderr
     result = json.loads((tmp_path / "footing.json").read_text())
     rows = {row["source"]: row for row in result["rows"]}
@@ -26,7 +26,7 @@ def test_the_retarget_stands_flatter_than_the_dataset(artifacts: Path, tmp_path:
     assert rows["bvh"]["median_tilt_deg"] == pytest.approx(0.7, abs=0.05)
     assert rows["csv"]["median_tilt_deg"] == pytest.approx(5.6, abs=0.05)
     unknown = subprocess.run(
-        [sys.executable, script, "--robots", "h1_3", "--out", str(tmp_path / "unknown")],
+        [*script, "--robots", "h1_3", "--out", str(tmp_path / "unknown")],
         capture_output=True,
         text=True,
         cwd=PROJECT,

@@ -35,8 +35,8 @@ actuator_force 3e-4, contact_force 3e-3 (of 470 N)."""
 def bench_result(tmp_path_factory: pytest.TempPathFactory) -> dict:
     pytest.importorskip("mujoco_warp", reason="the gpu extra (mujoco-warp) is not installed")
     monkeypatch = pytest.MonkeyPatch()
-    monkeypatch.syspath_prepend(str(PROJECT / "bench"))
-    from gpu_acceptance import main
+    monkeypatch.syspath_prepend(str(PROJECT))
+    from bench.gpu_acceptance import main
 
     out = tmp_path_factory.mktemp("gpu_acceptance") / "result.json"
     argv = ["--device", "cpu", "--envs", "4", "--steps", "20", "--split-steps", "3", "--raw-steps", "3"]

@@ -1,4 +1,4 @@
-"""A training restored from a saved state (`bench/dance_window_state.py`) carries its whole log but
+"""A training restored from a saved state (`scripts/dance_window_state.py`) carries its whole log but
 holds only the checkpoints saved since; train chooses among the checkpoints it holds. A
 fork of a longer run finishes as the shorter run without training."""
 
@@ -30,7 +30,7 @@ def _plan(iterations: int) -> workspace.Plan:
 
 
 def _state(action: str, iterations: int, state: Path, *extra: str) -> subprocess.CompletedProcess:
-    script = str(PROJECT / "bench" / "dance_window_state.py")
+    script = [sys.executable, "-m", "scripts.dance_window_state"]
     args = [
         action,
         "--profile",
@@ -45,7 +45,7 @@ def _state(action: str, iterations: int, state: Path, *extra: str) -> subprocess
         str(state),
         *extra,
     ]
-    return subprocess.run([sys.executable, script, *args], capture_output=True, text=True, cwd=PROJECT)
+    return subprocess.run([*script, *args], capture_output=True, text=True, cwd=PROJECT)
 
 
 def _manifest(plan: workspace.Plan, stage: str) -> dict:

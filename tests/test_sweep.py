@@ -91,8 +91,8 @@ def test_difference_interval_is_welchs_and_exact_without_spread() -> None:
 
 
 def test_findings_are_judged_by_the_side_of_zero_their_interval_lies_on(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.syspath_prepend(str(PROJECT / "bench"))  # the paper's claims are bench code
-    from findings import Claim, judge
+    monkeypatch.syspath_prepend(str(PROJECT))  # the paper's claims are study code
+    from studies.findings import Claim, judge
 
     lower_error = Claim("SELECTIVE has a lower E_mpjpe than NONE", "E_mpjpe", "selective", "absolute", False)
     seeds = {

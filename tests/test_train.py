@@ -297,12 +297,12 @@ def test_a_longer_run_with_resume_continues_the_shorter_one_bit_for_bit(artifact
 
 
 def _check_training_hours_script(grown: Path, per_run: dict[str, float], tmp_path: Path) -> None:
-    """`bench/training_hours.py --into` puts the log's hours into a result file an older commit's
+    """`scripts/training_hours.py --into` puts the log's hours into a result file an older commit's
     bench wrote, where its `wall_h` stood, and says which commit counted them."""
-    script = str(PROJECT / "bench" / "training_hours.py")
+    script = [sys.executable, "-m", "scripts.training_hours"]
     result = tmp_path / "result.json"
     result.write_text(json.dumps({"samples": 4, "wall_h": 9.0, "commit": "d23062d"}))
-    hours = subprocess.run([sys.executable, script, str(grown), "--into", str(result)], capture_output=True, text=True)
+    hours = subprocess.run([*script, str(grown), "--into", str(result)], capture_output=True, text=True, cwd=PROJECT)
     assert hours.returncode == 0, hours.stderr
     written = json.loads(result.read_text())
     head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=PROJECT)
@@ -318,9 +318,7 @@ def _check_training_hours_script(grown: Path, per_run: dict[str, float], tmp_pat
     assert written["wall_h_per_run"] == {key: round(seconds / 3600, 3) for key, seconds in per_run.items()}
     assert written["commit"] == "d23062d" and written["hours_commit"] == head.stdout.strip()
     result.write_text("[1, 2]")
-    refused = subprocess.run(
-        [sys.executable, script, str(grown), "--into", str(result)], capture_output=True, text=True
-    )
+    refused = subprocess.run([*script, str(grown), "--into", str(result)], capture_output=True, text=True)
     assert refused.returncode == 1
     assert refused.stderr == f"error: {result}: not a JSON result file (a list, not an object)\n"
     assert result.read_text() == "[1, 2]"
