@@ -1,7 +1,7 @@
 """Benchmark: a fingerprint of what the pipeline computes, to show a refactor changed nothing.
 
-    python -m studies.behaviour keys  [--out studies/results/behaviour_keys.json]
-    python -m studies.behaviour train [--out studies/results/behaviour_train.json] [--iterations 20]
+    python -m bench.behaviour keys  [--out bench/results/behaviour_keys.json]
+    python -m bench.behaviour train [--out bench/results/behaviour_train.json] [--iterations 20]
 
 `keys`: the planned artifact key of every stage for every (robot, take) the data folders hold,
 under each profile (seed 0). Keys hash the stage, its version, its resolved params, upstream keys
@@ -90,7 +90,7 @@ def main() -> None:
     parser.add_argument("--iterations", type=int, default=20)
     parser.add_argument("--out", type=Path, default=None)
     args = parser.parse_args()
-    out = args.out or Path(f"studies/results/behaviour_{args.what}.json")
+    out = args.out or Path(f"bench/results/behaviour_{args.what}.json")
     if args.what == "keys":
         result: dict[str, Any] = planned_keys()
     else:
