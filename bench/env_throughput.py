@@ -16,7 +16,7 @@ path's environments, divided by their number). Medians over `--repeats` blocks; 
 alternate block by block so both see the same machine. The last line reads
 `speedup=<fast path PPO samples/s / old> physics_ratio=<its env physics / its raw batched stepping>`
 (every path's ratio to old is in `speedup_by_path`; `fast_bf16` is the fast path with a bf16 update).
-The ranks path is real training (`rd_pipeline.rl.launch`, `--envs` split over the ranks, the same
+The ranks path is real training (`rd_pipeline.training.launch`, `--envs` split over the ranks, the same
 total batch): its PPO samples/s is the median of the training log's iterations after the first,
 one launch per block; its physics figures are those of the single-process fast path.
 With `--paths warp` the MuJoCo Warp backend is measured alone (`--device cuda` on a GPU).
@@ -40,21 +40,21 @@ import numpy as np
 import torch
 
 from rd_pipeline import paths
+from rd_pipeline.env.config import EnvConfig
+from rd_pipeline.env.mdp.rewards import GROUPS
+from rd_pipeline.env.physics.rollout import CONTROL
+from rd_pipeline.env.tracking_env import TrackingEnv
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.rl.env import TrackingEnv
-from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.launch import train_in_processes
-from rd_pipeline.rl.physics.rollout import CONTROL
-from rd_pipeline.rl.ppo import build_ppo
-from rd_pipeline.rl.ppo_config import PpoConfig
-from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.runner import Segments, TrainingJob
-from rd_pipeline.rl.training_config import TrainConfig
 from rd_pipeline.robots import Robot, load_robot
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
 from rd_pipeline.sampling.segments import segment_bounds
+from rd_pipeline.training.config import TrainConfig
+from rd_pipeline.training.launch import train_in_processes
+from rd_pipeline.training.ppo import build_ppo
+from rd_pipeline.training.ppo_config import PpoConfig
+from rd_pipeline.training.runner import Segments, TrainingJob
 
 FAST = {"physics_dt": 0.005, "decimation": 4, "solver_iterations": 10, "ls_iterations": 20}
 """mjlab's tracking task: 200 Hz physics, Newton with 10 iterations and 20 line-search steps."""

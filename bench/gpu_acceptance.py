@@ -48,23 +48,23 @@ import torch
 import warp as wp
 
 from rd_pipeline import paths
+from rd_pipeline.env.config import EnvConfig, Randomization
+from rd_pipeline.env.mdp import events
+from rd_pipeline.env.mdp.rewards import GROUPS
+from rd_pipeline.env.physics import MujocoCpuBackend, PhysicsState
+from rd_pipeline.env.physics.warp import MujocoWarpBackend, capture_blocker
+from rd_pipeline.env.sim_model import simulation_model
+from rd_pipeline.env.tracking_env import TrackingEnv
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.rl import events
-from rd_pipeline.rl.env import TrackingEnv
-from rd_pipeline.rl.env_config import EnvConfig, Randomization
-from rd_pipeline.rl.physics import MujocoCpuBackend, PhysicsState
-from rd_pipeline.rl.physics.warp import MujocoWarpBackend, capture_blocker
-from rd_pipeline.rl.ppo import build_ppo
-from rd_pipeline.rl.ppo_config import PpoConfig
-from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.sim_model import simulation_model
-from rd_pipeline.rl.trainer import train
 from rd_pipeline.robots import Robot, load_robot
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
 from rd_pipeline.sampling.segments import segment_bounds
+from rd_pipeline.training.ppo import build_ppo
+from rd_pipeline.training.ppo_config import PpoConfig
+from rd_pipeline.training.trainer import train
 
 FIELDS = tuple(PhysicsState.__dataclass_fields__)
 """The seven state fields compared with C MuJoCo."""

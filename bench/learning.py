@@ -19,15 +19,15 @@ import numpy as np
 import torch
 
 from rd_pipeline.api import workspace
+from rd_pipeline.env.mdp.rewards import GROUPS
+from rd_pipeline.env.tracking_env import TrackingEnv
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.rl.env import TrackingEnv
-from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal, survival, zero_action
-from rd_pipeline.rl.ppo import build_ppo
-from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.training_config import TrainConfig, clip_frames
-from rd_pipeline.rl.training_log import CHECKPOINT_DIR, checkpoints_by_iteration
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SegmentSampler
+from rd_pipeline.training.config import TrainConfig, clip_frames
+from rd_pipeline.training.evaluate import checkpoint_scorer, nominal, survival, zero_action
+from rd_pipeline.training.log import CHECKPOINT_DIR, checkpoints_by_iteration
+from rd_pipeline.training.ppo import build_ppo
 
 
 def main() -> None:

@@ -34,7 +34,7 @@ from typing import Any
 from bench.common import head_commit, training_hours
 from rd_pipeline.api import windows, workspace
 from rd_pipeline.evaluation.validation_report import ValidationReport
-from rd_pipeline.rl.training_log import read_training_log
+from rd_pipeline.training.log import read_training_log
 
 
 @dataclass(frozen=True)

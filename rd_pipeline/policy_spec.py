@@ -55,7 +55,7 @@ SCHEMA: dict[str, Any] = {
 _PER_ACTUATED = ("joints.kp", "joints.kd", "joints.effort_limit", "joints.default_pos")
 _PER_POLICY = ("joints.policy_lower", "joints.policy_upper")
 SEMANTICS = ("residual", "absolute", "reference")
-"""Per policy joint, how its target is formed (see `rd_pipeline.rl.actions`)."""
+"""Per policy joint, how its target is formed (see `rd_pipeline.env.mdp.actions`)."""
 
 
 @dataclass(frozen=True)

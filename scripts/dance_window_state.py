@@ -30,8 +30,8 @@ from pathlib import Path
 
 from rd_pipeline.api import workspace
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.rl.runner import CONTINUED_FILE
-from rd_pipeline.rl.training_log import CHECKPOINT_DIR, LOG_FILE, checkpoints_by_iteration, seal_checkpoint
+from rd_pipeline.training.log import CHECKPOINT_DIR, LOG_FILE, checkpoints_by_iteration, seal_checkpoint
+from rd_pipeline.training.runner import CONTINUED_FILE
 
 STATE_FILE = "state.json"
 """What the saved checkpoint belongs to (robot, motion, clip, train key, iteration)."""

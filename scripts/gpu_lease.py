@@ -26,7 +26,7 @@ from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.files import file_sha256
 from rd_pipeline.paths import artifacts_dir
-from rd_pipeline.rl.training_log import checkpoints_by_iteration
+from rd_pipeline.training.log import checkpoints_by_iteration
 
 
 def main() -> None:

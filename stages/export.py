@@ -9,9 +9,9 @@ from typing import Any, Literal
 from rd_pipeline.artifacts.stage import Stage, StageContext, typed_config
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.params import ParamRangeError
-from rd_pipeline.rl.training_config import TrainConfig
-from rd_pipeline.rl.training_log import ScoreFirst, best_held, checkpoints_by_iteration
 from rd_pipeline.robots.assets import model_files
+from rd_pipeline.training.config import TrainConfig
+from rd_pipeline.training.log import ScoreFirst, best_held, checkpoints_by_iteration
 
 Selection = Literal["last", "start_zero", "completion"]
 

@@ -11,19 +11,19 @@ from rich.markup import escape
 from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.artifacts.store import ArtifactRef
 from rd_pipeline.files import open_npz
-from rd_pipeline.rl.training_config import TrainConfig, clip_frames
 from rd_pipeline.robots.assets import model_files
+from rd_pipeline.training.config import TrainConfig, clip_frames
 
 if TYPE_CHECKING:
-    from rd_pipeline.rl.runner import ShorterRun, TrainingJob, TrainingOutcome
+    from rd_pipeline.training.runner import ShorterRun, TrainingJob, TrainingOutcome
 
 CURVE_FILE = "learning_curve.png"
 PROFILE_FILE = "sampler_profile.png"
 
 
 def _run(ctx: StageContext) -> dict[str, Any]:
-    from rd_pipeline.rl.runner import continued_from, training_metrics
-    from rd_pipeline.rl.training_log import best_held
+    from rd_pipeline.training.log import best_held
+    from rd_pipeline.training.runner import continued_from, training_metrics
 
     config: TrainConfig = ctx.params
     # Checkpoints and the log live in the work folder, which survives an interruption.
@@ -48,9 +48,9 @@ def _job(ctx: StageContext, config: TrainConfig, work: Path) -> tuple[TrainingJo
     """The training job for the clip of the reference, starting from the checkpoint to continue
     (an interrupted run's in `work`, or with `--resume` the longest finished shorter run's)."""
     from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
-    from rd_pipeline.rl.runner import Segments, TrainingJob, clip_segments, starting_checkpoint
     from rd_pipeline.robots import load_robot
     from rd_pipeline.sampling.prior import PRIOR_FILE
+    from rd_pipeline.training.runner import Segments, TrainingJob, clip_segments, starting_checkpoint
 
     robot = load_robot(ctx.robot_name)
     reference = ReferenceMotion.load(ctx.upstream["reference"].path / REFERENCE_FILE)
@@ -74,9 +74,9 @@ def _job(ctx: StageContext, config: TrainConfig, work: Path) -> tuple[TrainingJo
 
 def _train(ctx: StageContext, job: TrainingJob) -> TrainingOutcome:
     """Run the job in this process or as `ranks` processes, with a progress bar."""
-    from rd_pipeline.rl.launch import train_in_processes
-    from rd_pipeline.rl.runner import run_job
-    from rd_pipeline.rl.training_log import checkpoint_iteration
+    from rd_pipeline.training.launch import train_in_processes
+    from rd_pipeline.training.log import checkpoint_iteration
+    from rd_pipeline.training.runner import run_job
 
     first = checkpoint_iteration(job.checkpoint) if job.checkpoint else 0
     with ctx.progress(job.config.iterations, f"PPO {ctx.robot}", done=first) as advance:
@@ -88,7 +88,7 @@ def _train(ctx: StageContext, job: TrainingJob) -> TrainingOutcome:
 
 def _into_artifact(work: Path, out_dir: Path) -> list[dict]:
     """Move the work folder's checkpoints and log into the artifact; the log's rows."""
-    from rd_pipeline.rl.training_log import SEAL_DIR, read_training_log
+    from rd_pipeline.training.log import SEAL_DIR, read_training_log
 
     rows = read_training_log(work)
     # The seals guard an interrupted run; the artifact's manifest hashes its files.
@@ -102,8 +102,8 @@ def _into_artifact(work: Path, out_dir: Path) -> list[dict]:
 
 def _plot(rows: list[dict], best: dict, outcome: TrainingOutcome, out_dir: Path, title: str) -> None:
     """The learning curve and the sampler's failure profile, beside the checkpoints."""
-    from rd_pipeline.rl.plots import plot_learning_curve
     from rd_pipeline.sampling.plots import plot_sampler_profile
+    from rd_pipeline.training.plots import plot_learning_curve
 
     plot_learning_curve(rows, best, out_dir / CURVE_FILE, title)
     uniform = 1 / len(outcome.failure_rate)
@@ -112,7 +112,7 @@ def _plot(rows: list[dict], best: dict, outcome: TrainingOutcome, out_dir: Path,
 
 def _longest_shorter_run(runs: tuple[ArtifactRef, ...], iterations: int) -> ShorterRun | None:
     """The finished run with the most iterations below `iterations`, if any."""
-    from rd_pipeline.rl.runner import ShorterRun  # torch stays unloaded until a stage runs
+    from rd_pipeline.training.runner import ShorterRun  # torch stays unloaded until a stage runs
 
     below = [run for run in runs if run.manifest["params"]["iterations"] < iterations]
     if not below:
@@ -123,7 +123,7 @@ def _longest_shorter_run(runs: tuple[ArtifactRef, ...], iterations: int) -> Shor
 
 def _kept_progress(work: Path) -> tuple[bool, str]:
     """The checkpoint an interrupted training kept that a rerun continues from, if any."""
-    from rd_pipeline.rl.training_log import intact_checkpoints
+    from rd_pipeline.training.log import intact_checkpoints
 
     intact, damaged = intact_checkpoints(work)
     broken = "; ".join(f"{path.name}: {problem}" for path, problem in damaged.items())

@@ -37,8 +37,8 @@ from rd_pipeline.api.workspace import training_seconds
 from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.evaluation.metrics import ERROR_METRICS, t_interval
 from rd_pipeline.evaluation.report import REPORT_JSON
-from rd_pipeline.rl.training_log import checkpoints_by_iteration, read_training_log
 from rd_pipeline.stages.train import PROFILE_FILE
+from rd_pipeline.training.log import checkpoints_by_iteration, read_training_log
 from studies.findings import (
     PAPER_RESAMPLING,
     PAPER_TABLE_R5,

@@ -32,14 +32,14 @@ import torch
 
 from bench.common import head_commit, write_result
 from rd_pipeline.api import workspace
+from rd_pipeline.env.mdp.actions import joints_matching
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.rl.actions import joints_matching
-from rd_pipeline.rl.evaluate import scoring_starts, survival
-from rd_pipeline.rl.runner import Segments, TrainingJob, TrainingRunner, clip_segments
-from rd_pipeline.rl.trainer import load_checkpoint
-from rd_pipeline.rl.training_config import clip_frames
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.prior import PRIOR_FILE
+from rd_pipeline.training.config import clip_frames
+from rd_pipeline.training.evaluate import scoring_starts, survival
+from rd_pipeline.training.runner import Segments, TrainingJob, TrainingRunner, clip_segments
+from rd_pipeline.training.trainer import load_checkpoint
 
 
 def main() -> None:

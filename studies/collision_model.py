@@ -26,9 +26,9 @@ import numpy as np
 import trimesh
 
 from rd_pipeline import paths
+from rd_pipeline.env.sim_model import simulation_model
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
 from rd_pipeline.robots.primitives import fit_collision_meshes, mesh_vertices_in_body
 

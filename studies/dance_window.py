@@ -41,8 +41,8 @@ from rd_pipeline.artifacts.store import MANIFEST
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.validation_report import ValidationReport
 from rd_pipeline.motion.activity import joint_speed_p95_per_second
-from rd_pipeline.rl.training_log import read_training_log
 from rd_pipeline.stages.train import PROFILE_FILE
+from rd_pipeline.training.log import read_training_log
 from studies.validation_fields import fixed_grid_fields, validated_reference
 
 OPTIONS = {

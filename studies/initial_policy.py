@@ -28,17 +28,17 @@ import torch
 
 from bench.common import write_result
 from rd_pipeline.api import workspace
+from rd_pipeline.env.config import EnvConfig
+from rd_pipeline.env.tracking_env import TrackingEnv
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.activity import joint_speed_p95_per_second
 from rd_pipeline.motion.footing import footing_per_second
 from rd_pipeline.motion.reference import ReferenceMotion
-from rd_pipeline.rl.env import TrackingEnv
-from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.evaluate import nominal, scoring_starts, survival, zero_action
-from rd_pipeline.rl.training_config import clip_frames
 from rd_pipeline.robots import Robot, load_robot
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
 from rd_pipeline.sampling.segments import segment_bounds
+from rd_pipeline.training.config import clip_frames
+from rd_pipeline.training.evaluate import nominal, scoring_starts, survival, zero_action
 
 WINDOWS = ("g1:dance1_subject2:11:21", "h1_2:dance2_subject4:193:203")
 """The CPU and GPU dance windows of issue 31: G1's study window and H1-2's busiest ten seconds."""

@@ -127,7 +127,7 @@ def h1_2_dance_env(config, seed: int = 3, sampler_config=None):
     sampler of `sampler_config` (the default one when not given) on a flat balanced prior."""
     import torch
 
-    from rd_pipeline.rl.env import TrackingEnv
+    from rd_pipeline.env.tracking_env import TrackingEnv
     from rd_pipeline.robots import load_robot
     from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
     from rd_pipeline.sampling.segments import segment_bounds
@@ -142,9 +142,9 @@ def h1_2_dance_job(config, work: Path, checkpoint: Path | None = None):
     """A training job on the first 10 s of H1-2 dance2_subject4, one-second segments, flat prior."""
     import numpy as np
 
-    from rd_pipeline.rl.runner import Segments, TrainingJob
     from rd_pipeline.robots import load_robot
     from rd_pipeline.sampling.segments import segment_bounds
+    from rd_pipeline.training.runner import Segments, TrainingJob
 
     reference = h1_2_dance_reference().frames(0, 500)
     starts, lengths = segment_bounds(reference.n_frames, 50.0, 1.0, 0.25)

@@ -15,7 +15,7 @@ import torch
 from conftest import PROJECT
 
 from rd_pipeline.api import workspace
-from rd_pipeline.rl.training_log import read_training_log
+from rd_pipeline.training.log import read_training_log
 
 SETS = ("train.checkpoint_every=1",)
 CLIP = "11:13"

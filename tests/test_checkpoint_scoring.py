@@ -9,15 +9,15 @@ import pytest
 import torch
 from conftest import PROJECT, h1_2_dance_env
 
+from rd_pipeline.env.config import EnvConfig
+from rd_pipeline.env.mdp.actions import ActionConfig
+from rd_pipeline.env.mdp.rewards import GROUPS
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.rl.actions import ActionConfig
-from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal, scoring, scoring_starts, survival, zero_action
-from rd_pipeline.rl.ppo import MultiHeadPPO, build_ppo
-from rd_pipeline.rl.ppo_config import PpoConfig
-from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.trainer import train
-from rd_pipeline.rl.training_log import best_held, best_scored, checkpoint_path, read_training_log
+from rd_pipeline.training.evaluate import checkpoint_scorer, nominal, scoring, scoring_starts, survival, zero_action
+from rd_pipeline.training.log import best_held, best_scored, checkpoint_path, read_training_log
+from rd_pipeline.training.ppo import MultiHeadPPO, build_ppo
+from rd_pipeline.training.ppo_config import PpoConfig
+from rd_pipeline.training.trainer import train
 
 # With every joint residual, the zero action is the reference itself: a policy that stands a while.
 CONFIG = EnvConfig(num_envs=4, threads=2, actions=ActionConfig(mode="all"))

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from rd_pipeline.rl.sim_model import simulation_model
+from rd_pipeline.env.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
 from rd_pipeline.robots.config import available_robots
 from rd_pipeline.robots.primitives import fit_collision_meshes, mesh_vertices_in_body

@@ -11,16 +11,16 @@ import pytest
 import torch
 from conftest import cli, h1_2_dance_job
 
+from rd_pipeline.env.config import EnvConfig
+from rd_pipeline.env.mdp.actions import ActionConfig
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.rl.actions import ActionConfig
-from rd_pipeline.rl.distributed import Ranks
-from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.launch import train_in_processes
-from rd_pipeline.rl.ppo_config import PpoConfig
-from rd_pipeline.rl.runner import TrainingRunner, run_job
-from rd_pipeline.rl.trainer import load_checkpoint
-from rd_pipeline.rl.training_config import TrainConfig
-from rd_pipeline.rl.training_log import checkpoint_path, read_training_log
+from rd_pipeline.training.config import TrainConfig
+from rd_pipeline.training.distributed import Ranks
+from rd_pipeline.training.launch import train_in_processes
+from rd_pipeline.training.log import checkpoint_path, read_training_log
+from rd_pipeline.training.ppo_config import PpoConfig
+from rd_pipeline.training.runner import TrainingRunner, run_job
+from rd_pipeline.training.trainer import load_checkpoint
 
 CONFIG = TrainConfig(
     iterations=3,
@@ -124,7 +124,7 @@ def test_a_resumed_run_is_followed_by_iteration_from_its_checkpoint(tmp_path: Pa
     # The interrupted run logged iterations 1-5 but checkpointed after 3; the resumed run rewrites
     # the log up to 3 (a new file), logs 4 and 5 again, and 6 arrives in two writes. Following by
     # line count handed only 6.
-    from rd_pipeline.rl import launch
+    from rd_pipeline.training import launch
 
     monkeypatch.setattr(launch, "POLL_S", 0.0)
     log = tmp_path / "training_log.jsonl"

@@ -7,13 +7,13 @@ from pathlib import Path
 import torch
 from conftest import h1_2_dance_env
 
-from rd_pipeline.rl.actions import ActionConfig
-from rd_pipeline.rl.env import TrackingEnv
-from rd_pipeline.rl.env_config import EnvConfig, Randomization
-from rd_pipeline.rl.ppo import build_ppo
-from rd_pipeline.rl.ppo_config import PpoConfig
-from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.trainer import train
+from rd_pipeline.env.config import EnvConfig, Randomization
+from rd_pipeline.env.mdp.actions import ActionConfig
+from rd_pipeline.env.mdp.rewards import GROUPS
+from rd_pipeline.env.tracking_env import TrackingEnv
+from rd_pipeline.training.ppo import build_ppo
+from rd_pipeline.training.ppo_config import PpoConfig
+from rd_pipeline.training.trainer import train
 
 # Without randomization nothing else draws from the generator, so the worlds that did not blow up
 # must match an untouched environment bit for bit.

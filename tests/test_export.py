@@ -15,6 +15,9 @@ from conftest import RETARGETED_DIR, ReferenceSeeds, cli, video_frames
 from rerun.chunk import RrdReader
 from tensordict import TensorDict
 
+from rd_pipeline.env.config import EnvConfig
+from rd_pipeline.env.mdp.rewards import GROUPS
+from rd_pipeline.env.tracking_env import TrackingEnv
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.deploy import DeployController
 from rd_pipeline.export.exporter import build_policy_spec, load_actor, script_actor
@@ -22,15 +25,12 @@ from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.policy_runtime import OnnxPolicy
 from rd_pipeline.policy_spec import load_policy_spec
-from rd_pipeline.rl.env import TrackingEnv
-from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.evaluate import nominal
-from rd_pipeline.rl.ppo import build_ppo
-from rd_pipeline.rl.ppo_config import PpoConfig
-from rd_pipeline.rl.rewards import GROUPS
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
 from rd_pipeline.sampling.segments import segment_bounds
+from rd_pipeline.training.evaluate import nominal
+from rd_pipeline.training.ppo import build_ppo
+from rd_pipeline.training.ppo_config import PpoConfig
 
 
 def _env(robot_name: str, motion: str, config: EnvConfig):

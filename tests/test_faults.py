@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from conftest import PROJECT, cli, start_cli
 
-from rd_pipeline.rl.training_log import LOG_FILE, checkpoint_path, read_training_log
+from rd_pipeline.training.log import LOG_FILE, checkpoint_path, read_training_log
 
 TAKE = ("--robot", "g1", "--motion", "dance1_subject2", "--source", "csv", "--clip", "0:4")
 TRAIN = ("run", *TAKE, "--until", "train", "--set", "train.checkpoint_every=2")

@@ -11,9 +11,9 @@ import pytest
 import torch
 from conftest import PROJECT
 
+from rd_pipeline.env.physics import make_backend
+from rd_pipeline.env.sim_model import simulation_model
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.rl.physics import make_backend
-from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
 
 GAP_TOLERANCE = {
@@ -98,7 +98,7 @@ def test_bench_trains_and_monitors_overflow(bench_result: dict) -> None:
 @pytest.mark.offline
 def test_cuda_with_a_cpu_torch_is_refused_before_warp(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
-    monkeypatch.setitem(sys.modules, "rd_pipeline.rl.physics.warp", None)  # importing it would raise
+    monkeypatch.setitem(sys.modules, "rd_pipeline.env.physics.warp", None)  # importing it would raise
     with pytest.raises(PipelineError) as error:
         make_backend("warp", [], threads=1, device="cuda")
     expected = (
@@ -110,7 +110,7 @@ def test_cuda_with_a_cpu_torch_is_refused_before_warp(monkeypatch: pytest.Monkey
 
 def test_warp_diagnostics_report_peaks_since_the_last_call() -> None:
     pytest.importorskip("mujoco_warp", reason="the gpu extra (mujoco-warp) is not installed")
-    from rd_pipeline.rl.physics.warp import MujocoWarpBackend
+    from rd_pipeline.env.physics.warp import MujocoWarpBackend
 
     base = simulation_model(load_robot("g1"), collision="primitive")
     lying = copy.copy(base)
@@ -134,7 +134,7 @@ def test_warp_diagnostics_report_peaks_since_the_last_call() -> None:
 def test_c_backends_report_contact_peaks_since_the_last_call() -> None:
     """C MuJoCo has no contact capacity to overflow: its backends report how many there were,
     from MuJoCo's high-water marks over every physics step."""
-    from rd_pipeline.rl.physics import MujocoCpuBackend, MujocoRolloutBackend
+    from rd_pipeline.env.physics import MujocoCpuBackend, MujocoRolloutBackend
 
     base = simulation_model(load_robot("g1"), collision="primitive", body_sensors=True)
     qpos = torch.zeros(2, base.nq, dtype=torch.float64)

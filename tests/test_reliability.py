@@ -13,8 +13,8 @@ from conftest import LAFAN_DIR, PROJECT, RETARGETED_DIR, ROBOT_ASSETS, cli
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
-from rd_pipeline.rl.training_config import clip_frames
-from rd_pipeline.rl.training_log import read_training_log
+from rd_pipeline.training.config import clip_frames
+from rd_pipeline.training.log import read_training_log
 
 CSV_RUN = ("run", "--robot", "h1_2", "--motion", "dance2_subject4", "--until", "stats")
 

@@ -11,20 +11,20 @@ import pytest
 import torch
 from conftest import h1_2_dance_env
 
-from rd_pipeline.rl import reward_terms, terminations
-from rd_pipeline.rl.actions import RESIDUAL_PRESETS, ActionConfig, ResidualActions, joint_semantics
-from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
-from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.events import rsi_state
-from rd_pipeline.rl.physics import MujocoCpuBackend
-from rd_pipeline.rl.ppo import MultiHeadPPO, build_ppo
-from rd_pipeline.rl.ppo_config import PpoConfig
-from rd_pipeline.rl.reward_terms import PenaltyTerm, TermContext, TrackingState
-from rd_pipeline.rl.rewards import GROUPS, AdaptiveSigma, RewardManager, RewardsConfig
-from rd_pipeline.rl.sim_model import simulation_model
-from rd_pipeline.rl.terminations import TerminationContext, TerminationsConfig
+from rd_pipeline.env.config import EnvConfig
+from rd_pipeline.env.mdp import reward_terms, terminations
+from rd_pipeline.env.mdp.actions import RESIDUAL_PRESETS, ActionConfig, ResidualActions, joint_semantics
+from rd_pipeline.env.mdp.events import rsi_state
+from rd_pipeline.env.mdp.reward_terms import PenaltyTerm, TermContext, TrackingState
+from rd_pipeline.env.mdp.rewards import GROUPS, AdaptiveSigma, RewardManager, RewardsConfig
+from rd_pipeline.env.mdp.terminations import TerminationContext, TerminationsConfig
+from rd_pipeline.env.physics import MujocoCpuBackend
+from rd_pipeline.env.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
 from rd_pipeline.robots.config import available_robots
+from rd_pipeline.training.advantages import combined_advantage, multi_head_gae
+from rd_pipeline.training.ppo import MultiHeadPPO, build_ppo
+from rd_pipeline.training.ppo_config import PpoConfig
 
 N, B, P = 3, 5, 4
 
@@ -305,14 +305,14 @@ def test_the_copied_rsl_rl_methods_match_the_installed_library() -> None:
     from rsl_rl.algorithms import PPO
     from rsl_rl.storage import RolloutStorage
 
-    from rd_pipeline.rl.ppo import UPSTREAM_SOURCES
+    from rd_pipeline.training.ppo import UPSTREAM_SOURCES
 
     methods = {"PPO": PPO, "RolloutStorage": RolloutStorage}
     for name, digest in UPSTREAM_SOURCES.items():
         owner, method = name.split(".")
         source = inspect.getsource(getattr(methods[owner], method))
         assert hashlib.sha256(source.encode()).hexdigest() == digest, (
-            f"rsl-rl-lib's {name} changed: compare it with rd_pipeline/rl/ppo.py, then update UPSTREAM_SOURCES"
+            f"rsl-rl-lib's {name} changed: compare it with rd_pipeline/training/ppo.py, then update UPSTREAM_SOURCES"
         )
 
 
@@ -370,7 +370,7 @@ def test_an_episode_fails_when_any_termination_term_fires(monkeypatch: pytest.Mo
 def test_quaternion_product_and_rotation_vectors_match_scipy() -> None:
     from scipy.spatial.transform import Rotation
 
-    from rd_pipeline.rl import quat
+    from rd_pipeline.env import quat
 
     rotvec = np.random.default_rng(0).normal(size=(50, 3))
     rotvec[0] = 0.0  # the identity, where sin(x/2)/x needs its limit

@@ -9,11 +9,11 @@ import numpy as np
 import torch
 from conftest import RETARGETED_DIR
 
+from rd_pipeline.env.physics import MujocoCpuBackend, MujocoRolloutBackend
+from rd_pipeline.env.physics.state import body_velocities
+from rd_pipeline.env.sim_model import simulation_model
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.rl.physics import MujocoCpuBackend, MujocoRolloutBackend
-from rd_pipeline.rl.physics.state import body_velocities
-from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import load_robot
 
 TOLERANCE = 1e-9

@@ -16,7 +16,8 @@ from conftest import PROJECT, cli, start_cli
 
 from rd_pipeline import paths
 from rd_pipeline.artifacts.keys import artifact_key
-from rd_pipeline.artifacts.runner import Pipeline, execute
+from rd_pipeline.artifacts.plan import Pipeline
+from rd_pipeline.artifacts.runner import execute
 from rd_pipeline.artifacts.sources import resolve_source
 from rd_pipeline.artifacts.store import ArtifactStore
 from rd_pipeline.errors import PipelineError
@@ -62,17 +63,17 @@ def test_source_choice(monkeypatch: pytest.MonkeyPatch) -> None:
 def test_cache_hit_does_no_work_and_force_redoes_it(artifacts: Path) -> None:
     store = ArtifactStore(artifacts)
     pipeline = _pipeline("g1", "dance1_subject2")
-    (first,) = execute(pipeline, store, until="parse")
+    (first,) = execute(pipeline, store, (None, "parse", None))
     assert not first.cached and (first.path / "manifest.json").is_file()
     manifest = json.loads((first.path / "manifest.json").read_text())
     assert manifest["stage"] == "parse" and manifest["key"] == first.key and manifest["robot"] is None
     assert manifest["metrics"]["frames"] == 3945 and manifest["duration_s"] > 0
     assert list(manifest["inputs"].values()) == ["4f15d0b1caac72f9e58745f5ab9183d7dc051dd6fcdc4e1bd90af128b8cfab4d"]
     stamp = (first.path / "human_motion.npz").stat().st_mtime_ns
-    (second,) = execute(pipeline, store, until="parse")
+    (second,) = execute(pipeline, store, (None, "parse", None))
     assert second.cached and second.key == first.key
     assert (first.path / "human_motion.npz").stat().st_mtime_ns == stamp
-    (forced,) = execute(pipeline, store, until="parse", force=True)
+    (forced,) = execute(pipeline, store, (None, "parse", None), force=True)
     assert not forced.cached and forced.key == first.key
     assert (first.path / "human_motion.npz").stat().st_mtime_ns != stamp
     assert [p.name for p in (artifacts / "parse" / "dance1_subject2").iterdir()] == [first.key]
@@ -80,13 +81,13 @@ def test_cache_hit_does_no_work_and_force_redoes_it(artifacts: Path) -> None:
 
 def test_params_change_the_key_and_the_old_artifact_turns_stale(artifacts: Path) -> None:
     store = ArtifactStore(artifacts)
-    (old,) = execute(_pipeline("h1", "dance2_subject1"), store, until="import")
+    (old,) = execute(_pipeline("h1", "dance2_subject1"), store, (None, "import", None))
     changed = _pipeline("h1", "dance2_subject1", {"import": {"interpolation": "linear"}})
-    from rd_pipeline.artifacts.runner import stage_status
+    from rd_pipeline.artifacts.status import stage_status
 
     row = stage_status(changed, store)[0]
     assert row["stage"] == "import" and row["state"] == "stale" and row["other_keys"] == [old.key]
-    (new,) = execute(changed, store, until="import")
+    (new,) = execute(changed, store, (None, "import", None))
     assert new.key != old.key and not new.cached
 
 

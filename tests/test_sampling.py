@@ -10,9 +10,9 @@ import pytest
 import torch
 from conftest import RETARGETED_DIR, cli, h1_2_dance_env
 
+from rd_pipeline.env.config import EnvConfig
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.robots import load_robot
 from rd_pipeline.sampling.prior import flatness, solve_balanced_prior
 from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler, water_fill

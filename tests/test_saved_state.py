@@ -15,7 +15,7 @@ from conftest import PROJECT
 
 from rd_pipeline.api import workspace
 from rd_pipeline.artifacts.store import MANIFEST
-from rd_pipeline.rl.training_log import checkpoints_by_iteration, read_training_log
+from rd_pipeline.training.log import checkpoints_by_iteration, read_training_log
 
 SETS = ("train.checkpoint_every=1",)
 CLIP = "11:13"

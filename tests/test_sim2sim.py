@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import RETARGETED_DIR, video_frames
 
+from rd_pipeline.env.config import EnvConfig
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.deploy import reference_baseline_spec
 from rd_pipeline.evaluation.disturbances import Disturbances, RandomizedPhysics
@@ -24,7 +25,6 @@ from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.policy_spec import PolicySpec
-from rd_pipeline.rl.env_config import EnvConfig
 from rd_pipeline.robots import load_robot
 from rd_pipeline.viz.render import Scene, render_pictures
 

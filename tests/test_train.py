@@ -16,16 +16,16 @@ from conftest import PROJECT, ReferenceSeeds, cli, h1_2_dance_env
 
 from rd_pipeline.api.workspace import continued_runs, training_seconds, training_seconds_per_run
 from rd_pipeline.artifacts.stage import build_params
+from rd_pipeline.env.config import EnvConfig
+from rd_pipeline.env.mdp.rewards import GROUPS
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.params import parse_assignments
-from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.ppo import build_ppo
-from rd_pipeline.rl.ppo_config import PpoConfig
-from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.runner import Segments, clip_segments
-from rd_pipeline.rl.trainer import load_checkpoint, train
-from rd_pipeline.rl.training_log import read_training_log
 from rd_pipeline.stages import REGISTRY
+from rd_pipeline.training.log import read_training_log
+from rd_pipeline.training.ppo import build_ppo
+from rd_pipeline.training.ppo_config import PpoConfig
+from rd_pipeline.training.runner import Segments, clip_segments
+from rd_pipeline.training.trainer import load_checkpoint, train
 
 INTERRUPTED_ITERATIONS = 12
 """The interrupted run's length: interrupted at its third checkpoint, it has nine left to continue

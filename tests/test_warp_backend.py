@@ -11,10 +11,10 @@ import pytest
 import torch
 from conftest import RETARGETED_DIR
 
+from rd_pipeline.env.physics import MujocoCpuBackend
+from rd_pipeline.env.sim_model import simulation_model
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
-from rd_pipeline.rl.physics import MujocoCpuBackend
-from rd_pipeline.rl.sim_model import simulation_model
 from rd_pipeline.robots import Robot, load_robot
 
 pytest.importorskip("mujoco_warp", reason="the gpu extra (mujoco-warp) is not installed")
@@ -26,7 +26,7 @@ float64 C. Measured: 5e-7."""
 
 
 def test_warp_backend_matches_c_mujoco_on_a_short_rollout() -> None:
-    from rd_pipeline.rl.physics.warp import MujocoWarpBackend
+    from rd_pipeline.env.physics.warp import MujocoWarpBackend
 
     robot = load_robot("g1")
     reference = import_retargeted_csv(
@@ -71,7 +71,7 @@ def test_graphs_replay_what_kernel_launches_compute() -> None:
     """The graph path, on Warp's CPU device (which records graphs since Warp 1.19): the step graph
     with its refresh and the reset graph give exactly what launching kernel by kernel gives,
     through partial resets, pushes and joint forces; another substep count gets its own graph."""
-    from rd_pipeline.rl.physics.warp import MujocoWarpBackend
+    from rd_pipeline.env.physics.warp import MujocoWarpBackend
 
     robot = load_robot("g1")
     base = simulation_model(robot, collision="primitive")
@@ -104,7 +104,7 @@ def test_a_failed_capture_falls_back_to_kernel_launches(monkeypatch: pytest.Monk
     kernel by kernel, with the reason kept and said once; nothing of the failed capture ran."""
     import warp as wp
 
-    from rd_pipeline.rl.physics.warp import MujocoWarpBackend
+    from rd_pipeline.env.physics.warp import MujocoWarpBackend
 
     class FailingCapture:
         def __enter__(self):
@@ -150,16 +150,16 @@ def _reference_states(
 def test_ppo_trains_through_the_warp_backend(tmp_path) -> None:
     """A few PPO iterations end to end with physics in MuJoCo Warp (on Warp's CPU device here, on
     a GPU in the `paper` profile): the same environment, state as torch tensors from Warp."""
-    from rd_pipeline.rl.env import TrackingEnv
-    from rd_pipeline.rl.env_config import EnvConfig
-    from rd_pipeline.rl.evaluate import checkpoint_scorer, nominal
-    from rd_pipeline.rl.ppo import build_ppo
-    from rd_pipeline.rl.ppo_config import PpoConfig
-    from rd_pipeline.rl.rewards import GROUPS
-    from rd_pipeline.rl.trainer import train
-    from rd_pipeline.rl.training_log import read_training_log
+    from rd_pipeline.env.config import EnvConfig
+    from rd_pipeline.env.mdp.rewards import GROUPS
+    from rd_pipeline.env.tracking_env import TrackingEnv
     from rd_pipeline.sampling.sampler import SamplerConfig, SegmentSampler
     from rd_pipeline.sampling.segments import segment_bounds
+    from rd_pipeline.training.evaluate import checkpoint_scorer, nominal
+    from rd_pipeline.training.log import read_training_log
+    from rd_pipeline.training.ppo import build_ppo
+    from rd_pipeline.training.ppo_config import PpoConfig
+    from rd_pipeline.training.trainer import train
 
     torch.manual_seed(0)
     robot = load_robot("g1")

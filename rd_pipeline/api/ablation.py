@@ -10,8 +10,8 @@ import json
 from pathlib import Path
 
 from rd_pipeline.api.sweeps import TrialResult
+from rd_pipeline.env.mdp.actions import RESIDUAL_PRESETS
 from rd_pipeline.evaluation.metrics import ERROR_METRICS, t_interval
-from rd_pipeline.rl.actions import RESIDUAL_PRESETS
 
 STUDIES: dict[str, dict[str, tuple[str, ...]]] = {
     "residual": {mode: (f"train.env.actions.mode={mode}",) for mode in RESIDUAL_PRESETS},

@@ -13,7 +13,11 @@ reference, which no training param changes, so any plan of the take can choose i
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
+
+from rich.console import Console
 
 from rd_pipeline.api import workspace
 from rd_pipeline.errors import PipelineError
@@ -61,3 +65,66 @@ def window_footing(plan: workspace.Plan, window: Window) -> list[Footing]:
     assert plan.robot is not None  # a window is chosen from a robot's reference
     feet = load_robot_config(plan.robot).foot_bodies
     return footing_per_second(workspace.reference(plan), feet)[window.start_s : window.end_s]
+
+
+Selection = tuple[str | None, str | None, str | None]
+"""`--from`, `--until`, `--only`: the stages a run selects."""
+
+
+@dataclass(frozen=True)
+class ChosenWindow:
+    """The window a plan was clipped to, and how it was chosen."""
+
+    window: Window
+    """Its clip, start and end, and joint speed."""
+    quantile: float
+    """The speed quantile it was chosen at."""
+    footing: list[Footing]
+    """How the reference's feet stand in each of its seconds."""
+
+    def describe(self) -> str:
+        """One line: the clip, the speed it was chosen at, and where its feet stand."""
+        speed = f"joint speed p95 {self.window.joint_speed_p95:g} rad/s"
+        tilts = [second.lowest_foot_tilt_deg for second in self.footing]
+        planted = sum(second.planted_share for second in self.footing) / len(self.footing)
+        tilt = f"lowest-foot tilt {min(tilts):.0f}-{max(tilts):.0f} deg by the second"
+        feet = f"{tilt}, a foot planted in {planted:.0%} of frames"
+        return f"window: {self.window.clip} s at speed quantile {self.quantile:g} ({speed}; {feet})"
+
+
+def windowed_plan(
+    plan_with: Callable[[tuple[str, ...]], workspace.Plan],
+    seconds: int,
+    quantile: float,
+    selection: Selection | None,
+    console: Console | None = None,
+) -> tuple[workspace.Plan, ChosenWindow]:
+    """The plan clipped to the take's `seconds`-long window at speed `quantile`.
+
+    `plan_with(extra)` plans the take with `extra` overrides after the user's. The reference is
+    made first when the stages `selection` picks include the one that makes it (None: make
+    nothing); otherwise it must be in the store."""
+    whole = plan_with(())
+    trainer = workspace.providing(whole, "policy")
+    chosen = whole.pipeline.params[trainer].clip  # from --clip, --set or the params file
+    if chosen:
+        raise PipelineError(f"--window {seconds} and {trainer}.clip={chosen} both choose the clip: give one")
+    check_window(whole, seconds, quantile)
+    if selection is not None:
+        _make_reference(whole, selection, console)
+    window = speed_window(whole, seconds, quantile)
+    choice = ChosenWindow(window, quantile, window_footing(whole, window))
+    return plan_with((f"train.clip={window.clip}",)), choice
+
+
+def _make_reference(plan: workspace.Plan, selection: Selection, console: Console | None) -> None:
+    """Run the selected stages up to the one that makes the reference, if it is among them."""
+    start, until, only = selection
+    selected, _ = plan.pipeline.select(start, until, only)
+    maker = workspace.providing(plan, "reference")
+    if maker not in {stage.name for stage in selected}:
+        return
+    if only is not None:
+        workspace.run(plan, only=only, console=console)
+    else:
+        workspace.run(plan, start=start, until=maker, console=console)

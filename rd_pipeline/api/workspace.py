@@ -23,17 +23,20 @@ from typing import TYPE_CHECKING, Any
 from rich.console import Console
 
 from rd_pipeline import paths
-from rd_pipeline.artifacts.runner import Pipeline, PlannedStage, StageOutcome, execute, stage_status
+from rd_pipeline.api.progress import stage_lines
+from rd_pipeline.artifacts.plan import Pipeline, PlannedStage
+from rd_pipeline.artifacts.runner import StageOutcome, execute
 from rd_pipeline.artifacts.sources import check_motion_name, resolve_source
 from rd_pipeline.artifacts.stage import Stage
+from rd_pipeline.artifacts.status import stage_status
 from rd_pipeline.artifacts.store import MANIFEST, ArtifactStore
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.duration import bvh_duration_s, csv_duration_s
 from rd_pipeline.params import layered_params
-from rd_pipeline.rl.training_config import clip_frames
-from rd_pipeline.rl.training_log import checkpoints_by_iteration, read_training_log
 from rd_pipeline.robots.config import load_robot_config
 from rd_pipeline.stages import REGISTRY
+from rd_pipeline.training.config import clip_frames
+from rd_pipeline.training.log import checkpoints_by_iteration, read_training_log
 
 if TYPE_CHECKING:
     from rd_pipeline.motion.reference import ReferenceMotion
@@ -146,8 +149,11 @@ def run(
     resume: bool = False,
     console: Console | None = None,
 ) -> list[StageOutcome]:
-    """Run the selected stages of `plan`; cached artifacts are reused without work."""
-    return execute(plan.pipeline, plan.store, start, until, only, force, console, resume)
+    """Run the selected stages of `plan`; cached artifacts are reused without work. Each stage's
+    progress is printed on `console` (standard error by default)."""
+    console = console or Console(stderr=True, emoji=False)
+    report = stage_lines(plan.pipeline, console)
+    return execute(plan.pipeline, plan.store, (start, until, only), force, resume, report, console)
 
 
 def providing(plan: Plan, role: str) -> str:

@@ -1,48 +1,25 @@
-"""The DAG runner: plan the stages for one (robot, motion), compute keys, run what is not cached."""
+"""Running a planned DAG: reuse what the store holds whole, compute the rest under each key's
+lock, and say what happened through events (the API prints them)."""
 
 from __future__ import annotations
 
 import dataclasses
-import subprocess
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import UTC, datetime
-from functools import cached_property, lru_cache, partial
 from pathlib import Path
-from typing import Any
+from typing import Literal
 
 from rich.console import Console
-from rich.markup import escape
 
-from rd_pipeline import __version__, paths
 from rd_pipeline.artifacts.keys import artifact_key, canonical_json
-from rd_pipeline.artifacts.stage import Stage, StageContext, build_params
-from rd_pipeline.artifacts.store import ArtifactRef, ArtifactStore, file_records, write_manifest
+from rd_pipeline.artifacts.manifest import artifact_manifest, write_manifest
+from rd_pipeline.artifacts.plan import Pipeline, PlannedStage
+from rd_pipeline.artifacts.stage import Stage, StageContext
+from rd_pipeline.artifacts.store import ArtifactRef, ArtifactStore
 from rd_pipeline.errors import Interrupted, PipelineError
-from rd_pipeline.files import failed_write, file_sha256, folder_bytes, write_failure
+from rd_pipeline.files import failed_write, folder_bytes, write_failure
 from rd_pipeline.lazy import load_deferred
-
-
-@dataclass(frozen=True)
-class PlannedStage:
-    """A stage with everything that determines its artifact key."""
-
-    stage: Stage
-    """The stage."""
-    params: Any
-    """Its resolved params."""
-    inputs: dict[str, Path]
-    """External input files by label."""
-    input_hashes: dict[str, str]
-    """sha256 of each input file."""
-    upstream: dict[str, str]
-    """Upstream stage name -> key."""
-    key: str
-    """The artifact key."""
-
-    @property
-    def name(self) -> str:
-        return self.stage.name
 
 
 @dataclass(frozen=True)
@@ -62,131 +39,71 @@ class StageOutcome:
 
 
 @dataclass(frozen=True)
-class Pipeline:
-    """The stages of one run: a registry, a robot, a motion, a source, params."""
+class StageEvent:
+    """One thing a run did with a stage, as it happened."""
 
-    registry: tuple[Stage, ...]
-    """All stages that exist."""
-    robot: str | None
-    """Robot name; stages that are per robot need one."""
-    motion: str
-    """Motion name."""
-    source: str
-    """`bvh` or `csv`."""
-    param_values: dict[str, dict[str, Any]]
-    """Stage name -> param overrides (profile, params file and `--set`, already layered)."""
+    kind: Literal["damaged", "wait", "run", "cached", "done"]
+    """`damaged`: an artifact failed its check and is recomputed; `wait`: another run holds the
+    key; `run`: the stage starts; `cached`/`done`: its artifact was reused / made."""
+    stage: str
+    """Stage name."""
+    key: str
+    """Artifact key."""
+    path: Path | None = None
+    """The artifact's folder, where there is one."""
+    seconds: float = 0.0
+    """Wall time spent on the stage so far (`cached`, `done`)."""
+    detail: str = ""
+    """What is wrong (`damaged`)."""
 
-    @cached_property
-    def params(self) -> dict[str, Any]:
-        """Stage name -> its typed params, built once from `param_values` (every value checked)."""
-        return {stage.name: build_params(stage, self.param_values.get(stage.name, {})) for stage in self.registry}
 
-    def chain(self) -> list[Stage]:
-        """Stages of this source in dependency order (registry order breaks ties)."""
-        candidates = [s for s in self.registry if s.source in (None, self.source)]
-        ordered: list[Stage] = []
-        provided: set[str] = set()
-        progress = True
-        while progress:
-            progress = False
-            for stage in candidates:
-                if stage not in ordered and all(role in provided for role in stage.requires):
-                    ordered.append(stage)
-                    provided.add(stage.provides)
-                    progress = True
-        return ordered
-
-    def select(self, start: str | None, until: str | None, only: str | None) -> tuple[list[Stage], list[Stage]]:
-        """(stages to run, upstream stages that must already be cached)."""
-        chain = self.chain()
-        names = [s.name for s in chain]
-        for option, value in (("--from", start), ("--until", until), ("--only", only)):
-            if value is None:
-                continue
-            if value not in {s.name for s in self.registry}:
-                known = ", ".join(s.name for s in self.registry)
-                raise PipelineError(f"{option}: unknown stage '{value}' (stages: {known})")
-            if value not in names:
-                raise PipelineError(
-                    f"{option}: stage '{value}' is not in the {self.source} pipeline for "
-                    f"{self.robot}/{self.motion} (stages: {', '.join(names)})"
-                )
-        if only is not None:
-            if start is not None or until is not None:
-                given = "--from" if start is not None else "--until"
-                raise PipelineError(f"--only runs one stage; it cannot be combined with {given}")
-            start = until = only
-        first = names.index(start) if start else 0
-        last = names.index(until) if until else len(chain) - 1
-        if first > last:
-            raise PipelineError(f"--from {start} comes after --until {until}")
-        return chain[first : last + 1], chain[:first]
-
-    def plan(self, stages: list[Stage]) -> list[PlannedStage]:
-        """Keys for `stages` (which must include their upstream, in order)."""
-        planned: list[PlannedStage] = []
-        by_role: dict[str, PlannedStage] = {}
-        for stage in stages:
-            if stage.per_robot and not self.robot:
-                raise PipelineError(f"stage '{stage.name}' needs --robot")
-            params = self.params[stage.name]
-            inputs = stage.inputs(self.robot if stage.per_robot else None, self.motion)
-            for label, path in inputs.items():
-                paths.require_file(path, f"input '{label}' of stage {stage.name}")
-            hashes = {label: file_sha256(path) for label, path in sorted(inputs.items())}
-            upstream = {by_role[role].stage.name: by_role[role].key for role in stage.requires}
-            key = artifact_key(stage.name, stage.version, dataclasses.asdict(params), upstream, hashes)
-            entry = PlannedStage(stage, params, inputs, hashes, upstream, key)
-            planned.append(entry)
-            by_role[stage.provides] = entry
-        return planned
+Report = Callable[[StageEvent], None]
+"""Where a run's events go."""
 
 
 def execute(
     pipeline: Pipeline,
     store: ArtifactStore,
-    start: str | None = None,
-    until: str | None = None,
-    only: str | None = None,
+    selection: tuple[str | None, str | None, str | None] = (None, None, None),
     force: bool = False,
-    console: Console | None = None,
     resume: bool = False,
+    report: Report = lambda event: None,
+    console: Console | None = None,
 ) -> list[StageOutcome]:
-    """Run the selected stages; cached artifacts are reused without doing any work, damaged ones are
-    recomputed, and a key another process is computing is waited for, then reused."""
+    """Run the stages `selection` (`--from`, `--until`, `--only`) picks; cached artifacts are
+    reused without doing any work, damaged ones are recomputed, and a key another process is
+    computing is waited for, then reused. `console` is the stages' own, for their progress."""
     console = console or Console(stderr=True, emoji=False)
-    selected, before = pipeline.select(start, until, only)
+    selected, before = pipeline.select(*selection)
     planned = pipeline.plan(before + selected)
-    usable = _usable_artifacts(pipeline, store, planned, selected, force, console)
+    usable = _usable_artifacts(pipeline, store, planned, selected, force, report)
     refs: dict[str, ArtifactRef] = {}
     outcomes: list[StageOutcome] = []
     for entry in planned:
-        stage = entry.stage
-        robot = pipeline.robot if stage.per_robot else None
-        label = _label(robot, pipeline.motion)
         began = time.perf_counter()
-        ref = usable.get(stage.name)
+        ref = usable.get(entry.name)
         if entry.stage in before:
-            if ref is None:
-                raise PipelineError(
-                    f"upstream stage '{stage.name}' has no usable artifact {entry.key} for {label}; "
-                    f"make it first: `rd-pipeline stage {stage.name}` with the same options, or a run through it"
-                )
-            refs[stage.provides] = ref
+            refs[entry.stage.provides] = _upstream(pipeline, entry, ref)
             continue
         cached = ref is not None
         if ref is None:
-            ref, cached = _compute(pipeline, store, entry, refs, console, force, resume)
-        refs[stage.provides] = ref
+            ref, cached = _compute(pipeline, store, entry, refs, console, force, resume, report)
+        refs[entry.stage.provides] = ref
         seconds = time.perf_counter() - began
-        if cached:
-            console.print(f"[green]cached[/] {stage.name:<9} {escape(label)}  {entry.key}  ({seconds:.2f} s, no work)")
-        else:
-            console.print(
-                f"[green]done[/]   {stage.name:<9} {escape(label)}  {entry.key}  ({seconds:.2f} s) -> {escape(str(ref.path))}"
-            )
-        outcomes.append(StageOutcome(stage.name, entry.key, ref.path, cached, seconds))
+        report(StageEvent("cached" if cached else "done", entry.name, entry.key, ref.path, seconds))
+        outcomes.append(StageOutcome(entry.name, entry.key, ref.path, cached, seconds))
     return outcomes
+
+
+def _upstream(pipeline: Pipeline, entry: PlannedStage, ref: ArtifactRef | None) -> ArtifactRef:
+    """An upstream stage's artifact, which a run that starts after it needs whole."""
+    if ref is None:
+        label = pipeline.label(entry.stage)
+        raise PipelineError(
+            f"upstream stage '{entry.name}' has no usable artifact {entry.key} for {label}; "
+            f"make it first: `rd-pipeline stage {entry.name}` with the same options, or a run through it"
+        )
+    return ref
 
 
 def _compute(
@@ -197,19 +114,51 @@ def _compute(
     console: Console,
     force: bool,
     resume: bool,
+    report: Report,
 ) -> tuple[ArtifactRef, bool]:
     """The entry's artifact, made here under its key's lock, or by a concurrent run while this one
     waited for the lock; True where the concurrent run made it."""
-    stage = entry.stage
-    robot = pipeline.robot if stage.per_robot else None
-    label = _label(robot, pipeline.motion)
-    waiting = f"[yellow]wait[/]   {stage.name:<9} {escape(label)}  {entry.key}: another run is computing it"
-    with store.locked(stage.name, robot, pipeline.motion, entry.key, on_wait=partial(console.print, waiting)):
-        made = _made_meanwhile(store, entry, robot, pipeline.motion, force)
-        if made is not None:
-            return made, True
-        console.print(f"[cyan]run[/]    {stage.name:<9} {escape(label)}  {entry.key}")
-        return _run_stage(pipeline, store, entry, refs, console, resume=resume, restart=force), False
+    robot = pipeline.stage_robot(entry.stage)
+    waited = lambda: report(StageEvent("wait", entry.name, entry.key))
+    with store.claim(entry.name, robot, pipeline.motion, entry.key, force, waited) as claim:
+        if claim.made is not None:
+            return claim.made, True
+        assert claim.out is not None  # nothing made: a folder to write
+        report(StageEvent("run", entry.name, entry.key))
+        context = StageContext(
+            robot=robot,
+            motion=pipeline.motion,
+            params=entry.params,
+            inputs=entry.inputs,
+            upstream={role: refs[role] for role in entry.stage.requires},
+            out_dir=claim.out,
+            console=console,
+            work_dir=claim.work,
+            resume=resume,
+            restart=force,
+            shorter=_shorter_runs(store, entry, robot, pipeline.motion) if resume else (),
+        )
+        _run_stage(entry, context)
+    return ArtifactRef(entry.name, entry.key, store.folder(entry.name, robot, pipeline.motion) / entry.key), False
+
+
+def _run_stage(entry: PlannedStage, context: StageContext) -> None:
+    """Run the stage into its folder and write the manifest last; an interrupt or a refused
+    write is one line."""
+    out = context.out_dir
+    began = time.perf_counter()
+    load_deferred()
+    try:
+        metrics = entry.stage.run(context)
+        seconds = time.perf_counter() - began
+        write_manifest(out, artifact_manifest(entry, context.robot, context.motion, seconds, metrics, out))
+    except KeyboardInterrupt:
+        raise _interrupted(context, entry.name) from None
+    except Exception as exc:
+        refused = _refused_write(exc, context)
+        if refused is None:
+            raise
+        raise refused from None
 
 
 def _usable_artifacts(
@@ -218,7 +167,7 @@ def _usable_artifacts(
     planned: list[PlannedStage],
     selected: list[Stage],
     force: bool,
-    console: Console,
+    report: Report,
 ) -> dict[str, ArtifactRef]:
     """Stage name -> its artifact when it exists and is whole.
 
@@ -228,101 +177,25 @@ def _usable_artifacts(
     """
     found: dict[str, ArtifactRef] = {}
     for entry in planned:
-        robot = pipeline.robot if entry.stage.per_robot else None
+        robot = pipeline.stage_robot(entry.stage)
         ref = store.find(entry.stage.name, robot, pipeline.motion, entry.key)
         reported = entry.stage in selected
-        if ref is not None and not (force and reported) and _whole(ref, reported, console):
+        if ref is not None and not (force and reported) and _whole(entry, ref, reported, report):
             found[entry.stage.name] = ref
     for entry in reversed(planned):  # a stage recomputed after all loads its own upstream in turn
         name = entry.stage.name
         loaded = any(name in later.upstream and later.stage.name not in found for later in planned)
         hashed = entry.stage in selected  # the first pass hashed it already
-        if name in found and loaded and not hashed and not _whole(found[name], True, console):
+        if name in found and loaded and not hashed and not _whole(entry, found[name], True, report):
             del found[name]
     return found
 
 
-def _whole(ref: ArtifactRef, full: bool, console: Console) -> bool:
+def _whole(entry: PlannedStage, ref: ArtifactRef, full: bool, report: Report) -> bool:
     problem = ref.damage(full)
     if problem is not None:
-        console.print(
-            f"[yellow]damaged[/] {escape(str(ref.path))}: {escape(problem)}; it will be recomputed", highlight=False
-        )
+        report(StageEvent("damaged", entry.name, entry.key, ref.path, detail=problem))
     return problem is None
-
-
-def _made_meanwhile(
-    store: ArtifactStore, entry: PlannedStage, robot: str | None, motion: str, force: bool
-) -> ArtifactRef | None:
-    """The artifact a concurrent run finished while this one waited for the key's lock (a damaged
-    one found before the wait is still damaged, unless that run replaced it)."""
-    if force:
-        return None
-    ref = store.find(entry.stage.name, robot, motion, entry.key)
-    return ref if ref is not None and ref.damage(full=True) is None else None
-
-
-def _run_stage(
-    pipeline: Pipeline,
-    store: ArtifactStore,
-    entry: PlannedStage,
-    refs: dict[str, ArtifactRef],
-    console: Console,
-    resume: bool,
-    restart: bool,
-) -> ArtifactRef:
-    stage = entry.stage
-    robot = pipeline.robot if stage.per_robot else None
-    store.remove_abandoned(stage.name, robot, pipeline.motion, entry.key)
-    began = time.perf_counter()
-    replace = store.find(stage.name, robot, pipeline.motion, entry.key) is not None
-    with store.writing(stage.name, robot, pipeline.motion, entry.key, replace=replace) as out:
-        context = StageContext(
-            robot=robot,
-            motion=pipeline.motion,
-            params=entry.params,
-            inputs=entry.inputs,
-            upstream={role: refs[role] for role in stage.requires},
-            out_dir=out,
-            console=console,
-            work_dir=store.work_folder(stage.name, robot, pipeline.motion, entry.key),
-            resume=resume,
-            restart=restart,
-            shorter=_shorter_runs(store, entry, robot, pipeline.motion) if resume else (),
-        )
-        load_deferred()
-        try:
-            metrics = stage.run(context)
-            seconds = time.perf_counter() - began
-            write_manifest(out, _manifest(entry, robot, pipeline.motion, seconds, metrics, out))
-        except KeyboardInterrupt:
-            raise _interrupted(context, stage.name) from None
-        except Exception as exc:
-            refused = _refused_write(exc, context)
-            if refused is None:
-                raise
-            raise refused from None
-    return ArtifactRef(stage.name, entry.key, store.folder(stage.name, robot, pipeline.motion) / entry.key)
-
-
-def _manifest(
-    entry: PlannedStage, robot: str | None, motion: str, seconds: float, metrics: dict[str, Any], out: Path
-) -> dict[str, Any]:
-    """What an artifact says of itself: what made it, from what, when, its metrics and its files' hashes."""
-    return {
-        "stage": entry.stage.name,
-        "key": entry.key,
-        "robot": robot,
-        "motion": motion,
-        "params": dataclasses.asdict(entry.params),
-        "inputs": {str(path): entry.input_hashes[label] for label, path in entry.inputs.items()},
-        "upstream": entry.upstream,
-        "code_version": code_version(),
-        "created_at": datetime.now(UTC).isoformat(timespec="seconds"),
-        "duration_s": round(seconds, 3),
-        "metrics": metrics,
-        "files": file_records(out),
-    }
 
 
 def _refused_write(exc: Exception, context: StageContext) -> PipelineError | None:
@@ -365,57 +238,3 @@ def _shorter_runs(store: ArtifactStore, entry: PlannedStage, robot: str | None, 
         if recomputed == key and ref.damage(full=True) is None:
             found.append(ref)
     return tuple(found)
-
-
-def _label(robot: str | None, motion: str) -> str:
-    return f"{robot}/{motion}" if robot else motion
-
-
-@lru_cache(maxsize=1)
-def code_version() -> str:
-    """`0.1.0+g<commit>` in a git checkout, else the package version."""
-    try:
-        commit = subprocess.run(
-            ["git", "rev-parse", "--short", "HEAD"],
-            cwd=paths.PROJECT_ROOT,
-            capture_output=True,
-            text=True,
-            timeout=5,
-        ).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        commit = ""
-    return f"{__version__}+g{commit}" if commit else __version__
-
-
-def stage_status(pipeline: Pipeline, store: ArtifactStore, verify: bool = False) -> list[dict[str, Any]]:
-    """Per stage of the chain: key, path and state (cached / damaged / resumable / stale / missing),
-    or the reason there is no key. File sizes are always checked, their sha256 with `verify`."""
-    rows = []
-    chain = pipeline.chain()
-    for i, stage in enumerate(chain):
-        robot = pipeline.robot if stage.per_robot else None
-        row: dict[str, Any] = {"stage": stage.name, "robot": robot, "motion": pipeline.motion}
-        try:
-            entry = pipeline.plan(chain[: i + 1])[-1]
-        except PipelineError as exc:
-            rows.append({**row, "key": None, "path": None, "state": "missing", "reason": str(exc)})
-            continue
-        found = store.find(stage.name, robot, pipeline.motion, entry.key)
-        damage = found.damage(verify) if found else None
-        others = [k for k in store.keys(stage.name, robot, pipeline.motion) if k != entry.key]
-        work = store.work_folder(stage.name, robot, pipeline.motion, entry.key)
-        running = not found and store.running(stage.name, robot, pipeline.motion, entry.key)
-        kept = not found and not running and work.is_dir() and any(work.iterdir())
-        continues, progress = stage.kept_progress(work) if kept else (False, "")
-        damage = damage or (progress if kept and not continues else None)
-        states = (("damaged", damage), ("cached", found), ("running", running), ("resumable", kept), ("stale", others))
-        state = next((name for name, holds in states if holds), "missing")
-        path = store.folder(stage.name, robot, pipeline.motion) / entry.key
-        rows.append({**row, "key": entry.key, "path": str(path), "state": state, "other_keys": others})
-        if damage:
-            rows[-1]["reason"] = damage
-        elif kept:
-            rows[-1]["reason"] = progress
-        elif running:
-            rows[-1]["reason"] = "another run is computing it now"
-    return rows

@@ -66,6 +66,19 @@ class ArtifactRef:
         return None
 
 
+@dataclass(frozen=True)
+class Claim:
+    """A key's lock held: either the artifact a concurrent run finished while this one waited,
+    or the folders this run writes it into."""
+
+    made: ArtifactRef | None
+    """The artifact another run made meanwhile (nothing to do), or None."""
+    out: Path | None
+    """The temporary folder that becomes the artifact (None where `made`)."""
+    work: Path
+    """Where a long stage keeps its progress for the key until it finishes."""
+
+
 class ArtifactStore:
     """Artifact folders under one root."""
 
@@ -126,6 +139,30 @@ class ArtifactStore:
         except BaseException:
             shutil.rmtree(temp, ignore_errors=True)
             raise
+
+    @contextmanager
+    def claim(
+        self,
+        stage: str,
+        robot: str | None,
+        motion: str,
+        key: str,
+        redo: bool = False,
+        on_wait: Callable[[], None] = lambda: None,
+    ) -> Iterator[Claim]:
+        """Take the key's lock (waiting for a concurrent run of it) and yield what to do: the
+        whole artifact that run made, or, after clearing what a killed run left, a folder to write
+        into (see `writing`). With `redo` an existing artifact is made again and replaced."""
+        with self.locked(stage, robot, motion, key, on_wait):
+            found = None if redo else self.find(stage, robot, motion, key)
+            work = self.work_folder(stage, robot, motion, key)
+            if found is not None and found.damage(full=True) is None:
+                yield Claim(found, None, work)
+                return
+            self.remove_abandoned(stage, robot, motion, key)
+            replace = self.find(stage, robot, motion, key) is not None
+            with self.writing(stage, robot, motion, key, replace=replace) as out:
+                yield Claim(None, out, work)
 
     @contextmanager
     def locked(
@@ -197,21 +234,6 @@ class ArtifactStore:
                 shutil.rmtree(temp, ignore_errors=True)
                 removed += 1
         return removed
-
-
-def write_manifest(folder: Path, manifest: dict[str, Any]) -> None:
-    """Write the manifest through a temporary file so it is never seen half-written."""
-    temp = folder / f"{MANIFEST}.partial"
-    temp.write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
-    os.replace(temp, folder / MANIFEST)
-
-
-def file_records(folder: Path) -> dict[str, dict[str, Any]]:
-    """Size and sha256 of every file under `folder` (the manifest excepted), by relative path."""
-    records = {}
-    for path in sorted(p for p in folder.rglob("*") if p.is_file() and p.name != MANIFEST):
-        records[str(path.relative_to(folder))] = {"size": path.stat().st_size, "sha256": file_sha256(path)}
-    return records
 
 
 def _same_file(path: Path, handle: Any) -> bool:

@@ -16,6 +16,7 @@ from rich.table import Table
 from rd_pipeline import paths
 from rd_pipeline.api import sweeps, windows, workspace
 from rd_pipeline.api.ablation import STUDIES, ablation_table, write_ablation
+from rd_pipeline.api.windows import Selection
 from rd_pipeline.artifacts.runner import StageOutcome
 from rd_pipeline.cli.args import (
     DEFAULT_WINDOW_SPEED,
@@ -38,7 +39,7 @@ from rd_pipeline.profiles import profile_note
 from rd_pipeline.robots.config import available_robots, load_robot_config
 
 if TYPE_CHECKING:
-    from rd_pipeline.motion.footing import Footing
+    pass
 
 
 def _assignments(cmd: StageParams) -> tuple[str, ...]:
@@ -47,10 +48,6 @@ def _assignments(cmd: StageParams) -> tuple[str, ...]:
     backend = (f"train.env.backend={cmd.backend}",) if cmd.backend else ()
     ranks = (f"train.ranks={cmd.nproc}",) if cmd.nproc is not None else ()
     return cmd.set + clip + backend + ranks
-
-
-Selection = tuple[str | None, str | None, str | None]
-"""`--from`, `--until`, `--only`: the stages a run selects."""
 
 
 def _plan(cmd: PlanOptions, console: Console, selection: Selection | None) -> workspace.Plan:
@@ -65,48 +62,17 @@ def _take_plan(
 ) -> workspace.Plan:
     """`_plan` for a take given apart from the params (`status` walks the takes in the store)."""
     assignments = _assignments(cmd)
-    planned = workspace.plan(robot, motion, cmd.profile, cmd.params_file, assignments, cmd.seed, cmd.source)
+    plan_with = lambda extra: workspace.plan(
+        robot, motion, cmd.profile, cmd.params_file, (*assignments, *extra), cmd.seed, cmd.source
+    )
     if cmd.window is None:
         if cmd.window_speed is not None:
             raise PipelineError(f"--window-speed {cmd.window_speed:g} chooses among windows: give --window too")
-        return planned
-    trainer = workspace.providing(planned, "policy")
-    chosen = planned.pipeline.params[trainer].clip  # from --clip, --set or the params file
-    if chosen:
-        raise PipelineError(f"--window {cmd.window} and {trainer}.clip={chosen} both choose the clip: give one")
+        return plan_with(())
     quantile = DEFAULT_WINDOW_SPEED if cmd.window_speed is None else cmd.window_speed
-    windows.check_window(planned, cmd.window, quantile)
-    if selection is not None:
-        _make_reference(planned, selection, console)
-    window = windows.speed_window(planned, cmd.window, quantile)
-    speed = f"joint speed p95 {window.joint_speed_p95:g} rad/s"
-    footing = _footing(windows.window_footing(planned, window))
-    console.print(
-        escape(f"window: {window.clip} s at speed quantile {quantile:g} ({speed}; {footing})"), highlight=False
-    )
-    clipped = (*assignments, f"train.clip={window.clip}")
-    return workspace.plan(robot, motion, cmd.profile, cmd.params_file, clipped, cmd.seed, cmd.source)
-
-
-def _footing(seconds: list[Footing]) -> str:
-    """Where the window's feet stand: the range of its per-second lowest-foot tilt, and its planted share."""
-    tilts = [second.lowest_foot_tilt_deg for second in seconds]
-    planted = sum(second.planted_share for second in seconds) / len(seconds)
-    tilt = f"lowest-foot tilt {min(tilts):.0f}-{max(tilts):.0f} deg by the second"
-    return f"{tilt}, a foot planted in {planted:.0%} of frames"
-
-
-def _make_reference(planned: workspace.Plan, selection: Selection, console: Console) -> None:
-    """Run the selected stages up to the one that makes the reference, if it is among them."""
-    start, until, only = selection
-    selected, _ = planned.pipeline.select(start, until, only)
-    maker = workspace.providing(planned, "reference")
-    if maker not in {stage.name for stage in selected}:
-        return
-    if only is not None:
-        workspace.run(planned, only=only, console=console)
-    else:
-        workspace.run(planned, start=start, until=maker, console=console)
+    planned, chosen = windows.windowed_plan(plan_with, cmd.window, quantile, selection, console)
+    console.print(escape(chosen.describe()), highlight=False)
+    return planned
 
 
 def run(cmd: Run, console: Console) -> int:

@@ -15,9 +15,9 @@ import mujoco
 import numpy as np
 import torch
 
+from rd_pipeline.env.mdp.actions import ActionTargets
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.policy_spec import PolicySpec
-from rd_pipeline.rl.actions import ActionTargets
 
 
 def projected_gravity(quat_wxyz: np.ndarray) -> np.ndarray:

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from rd_pipeline.env.mdp import events
 from rd_pipeline.evaluation.protocol import RandomizedProtocol
-from rd_pipeline.rl import events
 
 
 @dataclass(frozen=True)

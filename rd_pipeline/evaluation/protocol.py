@@ -6,9 +6,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from rd_pipeline.env.config import Randomization
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.params import require_non_negative, require_positive
-from rd_pipeline.rl.env_config import Randomization
 
 
 @dataclass(frozen=True)

@@ -14,15 +14,15 @@ import mujoco
 import numpy as np
 import torch
 
+from rd_pipeline.env.mdp.terminations import bad_orientation, motion_gap
+from rd_pipeline.env.physics import MujocoCpuBackend
+from rd_pipeline.env.physics.state import PhysicsState
 from rd_pipeline.evaluation.deploy import DeployController
 from rd_pipeline.evaluation.disturbances import Disturbances
 from rd_pipeline.evaluation.protocol import Protocol
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.policy_runtime import Policy
 from rd_pipeline.policy_spec import PolicySpec
-from rd_pipeline.rl.physics import MujocoCpuBackend
-from rd_pipeline.rl.physics.state import PhysicsState
-from rd_pipeline.rl.terminations import bad_orientation, motion_gap
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ import mujoco
 import numpy as np
 import torch
 
+from rd_pipeline.env.sim_model import pd_simulation_model
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.deploy import reference_baseline_spec
 from rd_pipeline.evaluation.disturbances import Disturbances, RandomizedPhysics
@@ -26,7 +27,6 @@ from rd_pipeline.evaluation.validation_report import ValidationReport
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.policy_runtime import Policy, load_runtimes
 from rd_pipeline.policy_spec import SPEC_FILE, PolicySpec, load_policy_spec
-from rd_pipeline.rl.sim_model import pd_simulation_model
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.assets import asset_path
 from rd_pipeline.viz.render import Scene, render_pictures

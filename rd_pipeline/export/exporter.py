@@ -13,10 +13,10 @@ import torch
 from rsl_rl.models import MLPModel
 from tensordict import TensorDict
 
+from rd_pipeline.env.config import EnvConfig
+from rd_pipeline.env.mdp.actions import ActionConfig, joint_semantics
+from rd_pipeline.env.mdp.observations import actor_terms, layout_json
 from rd_pipeline.policy_spec import FORMAT_VERSION, PolicySpec
-from rd_pipeline.rl.actions import ActionConfig, joint_semantics
-from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.observations import actor_terms, layout_json
 from rd_pipeline.robots import Robot
 
 

@@ -19,9 +19,9 @@ from rd_pipeline.export.onnx_policy import export_onnx
 from rd_pipeline.files import write_bytes_whole
 from rd_pipeline.policy_runtime import OnnxPolicy
 from rd_pipeline.policy_spec import ONNX_FILE, POLICY_FILE, SPEC_FILE, load_policy_spec
-from rd_pipeline.rl.training_config import TrainConfig
-from rd_pipeline.rl.training_log import checkpoints_by_iteration
 from rd_pipeline.robots import Robot
+from rd_pipeline.training.config import TrainConfig
+from rd_pipeline.training.log import checkpoints_by_iteration
 
 
 @dataclass(frozen=True)

@@ -6,12 +6,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
+from rd_pipeline.env.mdp.actions import ActionConfig
+from rd_pipeline.env.mdp.curricula import CurriculaConfig
+from rd_pipeline.env.mdp.observations import ObservationsConfig
+from rd_pipeline.env.mdp.rewards import RewardsConfig
+from rd_pipeline.env.mdp.terminations import TerminationsConfig
 from rd_pipeline.params import require_positive
-from rd_pipeline.rl.actions import ActionConfig
-from rd_pipeline.rl.curricula import CurriculaConfig
-from rd_pipeline.rl.observations import ObservationsConfig
-from rd_pipeline.rl.rewards import RewardsConfig
-from rd_pipeline.rl.terminations import TerminationsConfig
 
 CollisionModel = Literal["primitive", "mesh"]
 """`primitive`: boxes fitted to the collision meshes (training); `mesh`: the robot's own meshes (validation)."""

@@ -12,8 +12,8 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
+from rd_pipeline.env.mdp.events import ReferenceFrames
 from rd_pipeline.motion.reference import ReferenceMotion
-from rd_pipeline.rl.events import ReferenceFrames
 from rd_pipeline.sampling.sampler import SegmentSampler
 
 Tensorize = Callable[..., torch.Tensor]

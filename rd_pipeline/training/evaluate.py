@@ -9,8 +9,8 @@ from collections.abc import Callable
 import torch
 from tensordict import TensorDict
 
-from rd_pipeline.rl.env import TrackingEnv
-from rd_pipeline.rl.env_config import EnvConfig, Randomization
+from rd_pipeline.env.config import EnvConfig, Randomization
+from rd_pipeline.env.tracking_env import TrackingEnv
 
 
 def nominal(config: EnvConfig, num_envs: int) -> EnvConfig:

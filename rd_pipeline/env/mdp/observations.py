@@ -11,8 +11,8 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING
 
+from rd_pipeline.env.quat import projected_gravity, rotate_inverse
 from rd_pipeline.lazy import lazy_import
-from rd_pipeline.rl.quat import projected_gravity, rotate_inverse
 
 if TYPE_CHECKING:
     import torch

@@ -17,8 +17,8 @@ import numpy as np
 import torch
 from mujoco import rollout
 
-from rd_pipeline.rl.physics.state import PhysicsState, state_buffers
-from rd_pipeline.rl.sim_model import BODY_SENSORS, actuator_force_index, body_sensor_index
+from rd_pipeline.env.physics.state import PhysicsState, state_buffers
+from rd_pipeline.env.sim_model import BODY_SENSORS, actuator_force_index, body_sensor_index
 
 STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
 CONTROL = mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_QFRC_APPLIED

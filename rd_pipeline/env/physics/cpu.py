@@ -13,7 +13,7 @@ import mujoco
 import numpy as np
 import torch
 
-from rd_pipeline.rl.physics.state import PhysicsState, body_velocities, state_buffers
+from rd_pipeline.env.physics.state import PhysicsState, body_velocities, state_buffers
 
 CHECKPOINT_STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS | mujoco.mjtState.mjSTATE_WARMSTART
 """What a checkpoint keeps of each world: with the solver's warm start, or a resumed run's next

@@ -16,7 +16,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from rd_pipeline.rl.env_config import CollisionModel
+from rd_pipeline.env.config import CollisionModel
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.assets import robot_file
 from rd_pipeline.robots.primitives import fit_collision_meshes

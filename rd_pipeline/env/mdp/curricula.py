@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from rd_pipeline.rl.terminations import TerminationsConfig
+from rd_pipeline.env.mdp.terminations import TerminationsConfig
 
 
 @dataclass(frozen=True)

@@ -9,9 +9,9 @@ from rsl_rl.models import MLPModel
 from rsl_rl.storage import RolloutStorage
 from tensordict import TensorDict
 
-from rd_pipeline.rl.advantages import combined_advantage, multi_head_gae
-from rd_pipeline.rl.distributed import ONE_PROCESS, Ranks
-from rd_pipeline.rl.ppo_config import PpoConfig
+from rd_pipeline.training.advantages import combined_advantage, multi_head_gae
+from rd_pipeline.training.distributed import ONE_PROCESS, Ranks
+from rd_pipeline.training.ppo_config import PpoConfig
 
 
 class MultiHeadRolloutStorage(RolloutStorage):

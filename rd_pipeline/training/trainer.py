@@ -15,13 +15,13 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 
+from rd_pipeline.env.mdp.rewards import GROUPS
+from rd_pipeline.env.tracking_env import TrackingEnv
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.files import write_bytes_whole
-from rd_pipeline.rl.distributed import ONE_PROCESS, Ranks, gather_to_leader, summed, weights_digest
-from rd_pipeline.rl.env import TrackingEnv
-from rd_pipeline.rl.ppo import MultiHeadPPO
-from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.training_log import LOG_FILE, checkpoint_path, logged_iteration, seal_checkpoint
+from rd_pipeline.training.distributed import ONE_PROCESS, Ranks, gather_to_leader, summed, weights_digest
+from rd_pipeline.training.log import LOG_FILE, checkpoint_path, logged_iteration, seal_checkpoint
+from rd_pipeline.training.ppo import MultiHeadPPO
 
 
 def rank_state(env: TrackingEnv) -> dict:

@@ -18,16 +18,16 @@ from typing import Any
 import numpy as np
 import torch
 
+from rd_pipeline.env.mdp.rewards import GROUPS
+from rd_pipeline.env.tracking_env import TrackingEnv
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
-from rd_pipeline.rl.distributed import ONE_PROCESS, Ranks
-from rd_pipeline.rl.env import TrackingEnv
-from rd_pipeline.rl.evaluate import checkpoint_scorer, scoring
-from rd_pipeline.rl.ppo import MultiHeadPPO, build_ppo
-from rd_pipeline.rl.rewards import GROUPS
-from rd_pipeline.rl.trainer import load_checkpoint, train
-from rd_pipeline.rl.training_config import TrainConfig
-from rd_pipeline.rl.training_log import (
+from rd_pipeline.robots import Robot
+from rd_pipeline.sampling.sampler import SegmentSampler
+from rd_pipeline.training.config import TrainConfig
+from rd_pipeline.training.distributed import ONE_PROCESS, Ranks
+from rd_pipeline.training.evaluate import checkpoint_scorer, scoring
+from rd_pipeline.training.log import (
     CHECKPOINT_DIR,
     LOG_FILE,
     checkpoint_path,
@@ -35,8 +35,8 @@ from rd_pipeline.rl.training_log import (
     intact_checkpoints,
     seal_checkpoint,
 )
-from rd_pipeline.robots import Robot
-from rd_pipeline.sampling.sampler import SegmentSampler
+from rd_pipeline.training.ppo import MultiHeadPPO, build_ppo
+from rd_pipeline.training.trainer import load_checkpoint, train
 
 CONTINUED_FILE = "continued_from.txt"
 """Key of the shorter finished run a grown training continued (its first iterations are that run's)."""

@@ -14,8 +14,7 @@ import dataclasses
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from rd_pipeline.lazy import lazy_import
-from rd_pipeline.rl.reward_terms import (
+from rd_pipeline.env.mdp.reward_terms import (
     GROUPS,
     REWARD_TERMS,
     AirTimeTerm,
@@ -27,6 +26,7 @@ from rd_pipeline.rl.reward_terms import (
     TrackingState,
     TrackingTerm,
 )
+from rd_pipeline.lazy import lazy_import
 
 if TYPE_CHECKING:
     import torch

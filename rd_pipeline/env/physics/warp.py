@@ -23,9 +23,9 @@ import mujoco
 import numpy as np
 import torch
 
+from rd_pipeline.env.physics.state import PhysicsState, body_velocities_torch
+from rd_pipeline.env.sim_model import RANDOMIZED_FIELDS
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.rl.physics.state import PhysicsState, body_velocities_torch
-from rd_pipeline.rl.sim_model import RANDOMIZED_FIELDS
 
 try:
     import mujoco_warp as mjw

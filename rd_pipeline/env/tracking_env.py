@@ -5,7 +5,7 @@ events are configured terms (`EnvConfig`), and `step` only wires them together. 
 terms are batched torch on the configured device; episode bookkeeping (lengths, start segments,
 pushes) stays on the host beside the random generator and the sampler, so a step reads only its done
 flags back from the device. MuJoCo is only reached through the backend seam
-(`rd_pipeline.rl.physics`). Observations come in rsl-rl groups (`policy`, `critic`); rewards come
+(`rd_pipeline.env.physics`). Observations come in rsl-rl groups (`policy`, `critic`); rewards come
 per group, one column per critic value head.
 """
 
@@ -18,19 +18,19 @@ import numpy as np
 import torch
 from tensordict import TensorDict
 
+from rd_pipeline.env.config import EnvConfig
+from rd_pipeline.env.mdp import curricula, events
+from rd_pipeline.env.mdp.actions import ResidualActions, joint_semantics
+from rd_pipeline.env.mdp.motion_command import MotionCommand
+from rd_pipeline.env.mdp.observations import ActorInputs, CriticInputs, actor_frame, actor_terms, critic_observation
+from rd_pipeline.env.mdp.reward_terms import TermContext, TrackingState
+from rd_pipeline.env.mdp.rewards import AdaptiveSigma, RewardManager
+from rd_pipeline.env.mdp.terminations import TerminationContext, failed
+from rd_pipeline.env.physics import make_backend
+from rd_pipeline.env.quat import rotate_inverse
+from rd_pipeline.env.sim_model import SolverBudget, simulation_model
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
-from rd_pipeline.rl import curricula, events
-from rd_pipeline.rl.actions import ResidualActions, joint_semantics
-from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.motion_command import MotionCommand
-from rd_pipeline.rl.observations import ActorInputs, CriticInputs, actor_frame, actor_terms, critic_observation
-from rd_pipeline.rl.physics import make_backend
-from rd_pipeline.rl.quat import rotate_inverse
-from rd_pipeline.rl.reward_terms import TermContext, TrackingState
-from rd_pipeline.rl.rewards import AdaptiveSigma, RewardManager
-from rd_pipeline.rl.sim_model import SolverBudget, simulation_model
-from rd_pipeline.rl.terminations import TerminationContext, failed
 from rd_pipeline.robots import Robot
 from rd_pipeline.sampling.sampler import SegmentSampler
 

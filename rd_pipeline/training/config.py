@@ -7,12 +7,12 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from rd_pipeline.env.config import EnvConfig
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion import MIN_MOTION_S
 from rd_pipeline.params import ParamRangeError, require_positive
-from rd_pipeline.rl.env_config import EnvConfig
-from rd_pipeline.rl.ppo_config import PpoConfig
 from rd_pipeline.sampling.sampler import SamplerConfig
+from rd_pipeline.training.ppo_config import PpoConfig
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 from matplotlib.ticker import MaxNLocator
 
-from rd_pipeline.rl.rewards import GROUPS
+from rd_pipeline.env.mdp.rewards import GROUPS
 
 
 def plot_learning_curve(rows: list[dict], best: dict, path: Path, title: str = "") -> None:

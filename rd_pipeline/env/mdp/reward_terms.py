@@ -1,7 +1,7 @@
 """Reward term functions and their configs: pure torch functions of a batched tracking state.
 
 Each function maps (state, context, its config) to an (N,) squared error (tracking terms) or
-penalty magnitude (regularization terms); `rd_pipeline.rl.rewards` weighs and sums them. The body
+penalty magnitude (regularization terms); `rd_pipeline.env.mdp.rewards` weighs and sums them. The body
 terms average their bodies' squared errors; the joint terms sum over the joints, so their sigma
 bounds the whole joint vector's error: the appendix's 30 rad/s for joint velocity would leave a
 per-joint mean always near zero against it, a kernel that tells no two policies apart.

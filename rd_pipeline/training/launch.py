@@ -1,7 +1,7 @@
 """Running a training job as several processes (data-parallel PPO) through torchrun.
 
 The stage process writes the job beside the work folder and starts `torchrun`, whose ranks run
-`python -m rd_pipeline.rl.launch JOB`: each joins the process group, trains its share, and rank 0
+`python -m rd_pipeline.training.launch JOB`: each joins the process group, trains its share, and rank 0
 writes the log, the checkpoints and the outcome. The stage process follows the log for its
 progress bar. On one machine torchrun runs standalone; across machines it takes its rendezvous
 from its own environment variables (`PET_NNODES`, `PET_NODE_RANK`, `PET_RDZV_ENDPOINT`, ...).
@@ -23,9 +23,9 @@ from pathlib import Path
 import torch
 
 from rd_pipeline.errors import PipelineError, ShareDone
-from rd_pipeline.rl.distributed import join_process_group, leave_process_group
-from rd_pipeline.rl.runner import TrainingJob, TrainingOutcome, run_job
-from rd_pipeline.rl.training_log import LOG_FILE, checkpoint_iteration
+from rd_pipeline.training.distributed import join_process_group, leave_process_group
+from rd_pipeline.training.log import LOG_FILE, checkpoint_iteration
+from rd_pipeline.training.runner import TrainingJob, TrainingOutcome, run_job
 
 POLL_S = 1.0
 """How often the stage process reads the log of running ranks."""

@@ -10,10 +10,10 @@ from __future__ import annotations
 import mujoco
 import torch
 
+from rd_pipeline.env.physics.cpu import MujocoCpuBackend
+from rd_pipeline.env.physics.rollout import MujocoRolloutBackend
+from rd_pipeline.env.physics.state import PhysicsBackend, PhysicsState
 from rd_pipeline.errors import PipelineError
-from rd_pipeline.rl.physics.cpu import MujocoCpuBackend
-from rd_pipeline.rl.physics.rollout import MujocoRolloutBackend
-from rd_pipeline.rl.physics.state import PhysicsBackend, PhysicsState
 
 __all__ = ["BACKENDS", "MujocoCpuBackend", "MujocoRolloutBackend", "PhysicsBackend", "PhysicsState", "make_backend"]
 
@@ -38,7 +38,7 @@ def make_backend(name: str, models: list[mujoco.MjModel], threads: int, device: 
                 'install the CUDA build, see docs/training.md "Training on a GPU"'
             )
         # mujoco-warp is an optional extra: imported only when asked for.
-        from rd_pipeline.rl.physics.warp import MujocoWarpBackend
+        from rd_pipeline.env.physics.warp import MujocoWarpBackend
 
         return MujocoWarpBackend(models, device)
     raise PipelineError(f"train.env.backend must be one of {', '.join(BACKENDS)}, got '{name}'")

@@ -17,9 +17,9 @@ import mujoco
 import numpy as np
 import torch
 
-from rd_pipeline.rl import quat
-from rd_pipeline.rl.env_config import EnvConfig, Randomization
-from rd_pipeline.rl.sim_model import randomized_copy
+from rd_pipeline.env import quat
+from rd_pipeline.env.config import EnvConfig, Randomization
+from rd_pipeline.env.sim_model import randomized_copy
 
 DR_PARAMS = ("mass", "friction", "kp", "kd", "com_x", "com_y", "com_z", "delay", "rfi_factor")
 """Per-environment randomization draws, in the order the critic observes them."""

@@ -12,9 +12,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from rd_pipeline.env.mdp.reward_terms import TrackingState
+from rd_pipeline.env.quat import projected_gravity
 from rd_pipeline.lazy import lazy_import
-from rd_pipeline.rl.quat import projected_gravity
-from rd_pipeline.rl.reward_terms import TrackingState
 
 if TYPE_CHECKING:
     import torch

@@ -1,1 +1,0 @@
-"""Residual-action tracking RL: actions, rewards, the multi-head advantage, the physics backend."""
