@@ -1,6 +1,6 @@
 """Benchmark curve: a run's checkpoints at fixed iterations, validated on the mesh, against samples.
 
-    python -m studies.checkpoint_curve CHECKPOINT.json ... [--out bench/results/checkpoint_curve]
+    python -m studies.checkpoint_curve CHECKPOINT.json ... [--out studies/results/checkpoint_curve]
 
 A stage's exported checkpoint is the best training-model start-zero among those it holds, so a
 noisy score picks a lucky checkpoint. This reads result files of checkpoints chosen by iteration
