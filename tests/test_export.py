@@ -223,3 +223,5 @@ def test_smoke_profile_trains_exports_and_validates(
         steps = round(on_onnx["nominal"]["policy"]["start_zero"]["mean_survival_s"] * 50)
         assert rows["/robot/tracked/pelvis"] == steps + 1 and rows["/robot/retarget/pelvis"] == 6575
         assert rows["/human/joints"] == 3945
+        # Its tracking errors plotted, one value per step it survived.
+        assert rows["/tracking/body_error_m"] == rows["/tracking/joint_error_rad"] == steps
