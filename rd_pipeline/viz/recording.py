@@ -12,7 +12,7 @@ from rd_pipeline.motion.human import HUMAN_MOTION_FILE, HumanMotion
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.retarget.quality import QUALITY_SERIES_FILE
 from rd_pipeline.retarget.targets import TARGETS_FILE
-from rd_pipeline.viz.layout import Plot, send_layout
+from rd_pipeline.viz.layout import Follow, Plot, send_layout
 from rd_pipeline.viz.rerun_view import (
     REFERENCE_COLOR,
     TARGET_COLOR,
@@ -53,23 +53,32 @@ def record_motion(
         for path in human_files:
             log_human(rec, HumanMotion.load(path))
         plots = []
+        follow = None
         for stage, path in reference_files:
-            plots += _log_reference(rec, model, stage, path, tracked)
-        send_layout(rec, plots)
+            reference = ReferenceMotion.load(path)
+            plots += _log_reference(rec, model, stage, reference, path.parent, tracked)
+            follow = follow or _root(reference, f"robot/{stage}")
+        send_layout(rec, plots, follow)
     return out
 
 
-def _log_reference(rec, model, stage: str, path: Path, tracked: Path | None) -> list[Plot]:
-    """One stage's robot reference, its IK targets and quality rulers, and the tracked robot;
-    the plots of what it logged."""
-    reference = ReferenceMotion.load(path)
-    _log_robot(rec, model, reference, f"robot/{stage}", f"reference robot ({stage})")
-    targets = path.parent / TARGETS_FILE
+def _root(reference: ReferenceMotion, entity: str) -> Follow:
+    """The reference robot's root body, for the camera to follow."""
+    return Follow(f"{entity}/{reference.body_names[0]}", reference.body_pos_w[0, 0])
+
+
+def _log_reference(
+    rec, model, stage: str, reference: ReferenceMotion, folder: Path, tracked: Path | None
+) -> list[Plot]:
+    """One stage's robot reference (its artifact in `folder`), its IK targets and quality rulers,
+    and the tracked robot; the plots of what it logged."""
+    _log_robot(rec, model, reference, f"robot/{stage}", f"reference ({stage})")
+    targets = folder / TARGETS_FILE
     if targets.is_file():
         with open_npz(targets) as data:
             log_points(rec, f"targets/{stage}", data["positions"], reference.fps, TARGET_COLOR, 0.015)
     plots = []
-    series = path.parent / QUALITY_SERIES_FILE
+    series = folder / QUALITY_SERIES_FILE
     if series.is_file():
         plots += _log_rulers(rec, stage, series, reference.fps)
     if tracked is not None:
@@ -115,7 +124,7 @@ def log_tracked(rec, model, reference: ReferenceMotion, tracked: TrackedRollout,
     first = tracked.first_frame
     entity = "robot/tracked"
     log_robot_meshes(rec, model, names, body_pos, tracked.body_quat[:, ids], tracked.fps, entity, TRACKED_COLOR, first)
-    log_label(rec, entity, "tracked robot (policy in MuJoCo)", body_pos[:, 0], tracked.fps, TRACKED_COLOR, first)
+    log_label(rec, entity, "tracked (sim2sim)", body_pos[:, 0], tracked.fps, TRACKED_COLOR, first)
     # Error k is measured after step k, at pose k + 1.
     plots = [
         _log_error(rec, "tracking/body_error_m", tracked.body_error_m, tracked, "tracking error: bodies (m)"),
@@ -140,6 +149,7 @@ def record_tracking(model, reference: ReferenceMotion, tracked: Path, name: str,
     tracked one shifted `SIDE_BY_SIDE_M` along +y); `reference` is the clip the rollout started on."""
     rollout = TrackedRollout.load(tracked)
     with open_recording(name, out) as rec:
-        _log_robot(rec, model, reference, "robot/reference", "reference robot", rollout.first_frame)
-        send_layout(rec, log_tracked(rec, model, reference, rollout, SIDE_BY_SIDE_M))
+        _log_robot(rec, model, reference, "robot/reference", "reference", rollout.first_frame)
+        plots = log_tracked(rec, model, reference, rollout, SIDE_BY_SIDE_M)
+        send_layout(rec, plots, _root(reference, "robot/reference"))
     return out

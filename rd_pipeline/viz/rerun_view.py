@@ -116,26 +116,33 @@ def log_robot_meshes(
     color: tuple[int, int, int] = REFERENCE_COLOR,
     first_frame: int = 0,
 ) -> None:
-    """The robot's visual meshes, one static mesh per body, moved by per-frame body transforms
+    """The robot's visual meshes, one mesh per body, moved by per-frame body transforms
     (`body_pos_w` (T, B, 3), `body_quat_w` (T, B, 4) wxyz, bodies named by `body_names`).
 
     The meshes are decimated to their vertex sets as MuJoCo compiled them; each body's geoms are
-    merged into one mesh in the body frame, so a frame costs one transform per body.
+    merged into one mesh in the body frame, so a frame costs one transform per body. Each mesh is
+    logged once, at the first pose, not as static data: before that pose it would stand at the
+    origin, and a `Clear` cannot take static data away.
     """
     times = _times(len(body_pos_w), fps, first_frame)
+    start = _times(1, fps, first_frame)
     for b, name in enumerate(body_names):
         body_id = model.body(name).id
         vertices, faces = _body_mesh(model, body_id)
         if not len(vertices):
             continue
         path = f"{entity}/{name}"
-        rec.log(
-            path, rr.Mesh3D(vertex_positions=vertices, triangle_indices=faces, albedo_factor=[*color, 255]), static=True
-        )
+        mesh = rr.Mesh3D.columns(vertex_positions=vertices, triangle_indices=faces, albedo_factor=[[*color, 255]])
+        rec.send_columns(path, indexes=start, columns=_one_row(mesh))
         quat_xyzw = body_quat_w[:, b][:, [1, 2, 3, 0]]
         rec.send_columns(
             path, indexes=times, columns=rr.Transform3D.columns(translation=body_pos_w[:, b], quaternion=quat_xyzw)
         )
+
+
+def _one_row(columns: rr.ComponentColumnList) -> list[rr.ComponentColumn]:
+    """`columns` as a single row holding all their values (`send_columns` sends rows)."""
+    return [column.partition([len(column.as_arrow_array())]) for column in columns]
 
 
 def _body_mesh(model: mujoco.MjModel, body_id: int) -> tuple[np.ndarray, np.ndarray]:
