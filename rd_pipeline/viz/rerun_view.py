@@ -31,6 +31,9 @@ END_COLOR = (213, 94, 0)
 
 LABEL_ABOVE_ROOT_M = 0.9
 """How far above its root a source's name floats (above the head of a person or robot)."""
+LABEL_RADIUS_M = 0.03
+END_RADIUS_M = 0.06
+"""The marker where a rollout ended: larger than any joint, to be found at a glance."""
 
 
 def _times(n_frames: int, fps: float, first_frame: int = 0) -> list[rr.TimeColumn]:
@@ -88,7 +91,7 @@ def log_label(
     )
     rec.log(
         f"{entity}/label",
-        rr.Points3D.from_fields(colors=[color], radii=[0.03], labels=[text], show_labels=True),
+        rr.Points3D.from_fields(colors=[color], radii=[LABEL_RADIUS_M], labels=[text], show_labels=True),
         static=True,
     )
 
@@ -101,7 +104,7 @@ def log_end(rec: rr.RecordingStream, entity: str, seconds: float, where: np.ndar
     rec.send_columns(entity, indexes=at, columns=rr.Clear.columns(is_recursive=[True]))
     marker = rr.Points3D.columns(positions=[where], labels=[text])
     rec.send_columns(f"{entity}_end", indexes=at, columns=marker)
-    style = rr.Points3D.from_fields(colors=[END_COLOR], radii=[0.06], show_labels=True)
+    style = rr.Points3D.from_fields(colors=[END_COLOR], radii=[END_RADIUS_M], show_labels=True)
     rec.log(f"{entity}_end", style, static=True)
 
 
