@@ -12,9 +12,16 @@ from rd_pipeline.robots.assets import model_files
 
 def _run(ctx: StageContext) -> dict[str, Any]:
     from rd_pipeline.evaluation.report import CONTROLLERS, plot_report, write_json, write_markdown
-    from rd_pipeline.evaluation.validation import load_exported_spec, reference_clip, rollout_pictures, validate_policy
+    from rd_pipeline.evaluation.validation import (
+        load_exported_spec,
+        recorded_rollout,
+        reference_clip,
+        rollout_pictures,
+        validate_policy,
+    )
     from rd_pipeline.robots import load_robot
-    from rd_pipeline.viz.recording import TRACKED_FILE, record_tracking, save_tracked
+    from rd_pipeline.viz.recording import record_tracking
+    from rd_pipeline.viz.tracked import TRACKED_FILE
 
     config: ValidationConfig = ctx.params
     exported = ctx.upstream["deployable_policy"]
@@ -32,24 +39,15 @@ def _run(ctx: StageContext) -> dict[str, Any]:
     write_json(report, ctx.out_dir)
     write_markdown(report, ctx.out_dir)
     plot_report(report, ctx.out_dir)
-    tracked = validation.tracked
-    assert tracked.body_pos is not None and tracked.body_quat is not None  # the first rollout keeps its poses
-    save_tracked(ctx.out_dir / TRACKED_FILE, tracked.body_pos, tracked.body_quat, clip.start_frame, clip.motion.fps)
+    recorded_rollout(validation, clip).save(ctx.out_dir / TRACKED_FILE)
     recording = f"{ctx.robot}_{ctx.motion}_sim2sim"
-    record_tracking(
-        robot.model,
-        clip.motion,
-        ctx.out_dir / TRACKED_FILE,
-        recording,
-        ctx.out_dir / RECORDING_FILE,
-        first_frame=clip.start_frame,
-    )
+    record_tracking(robot.model, clip.motion, ctx.out_dir / TRACKED_FILE, recording, ctx.out_dir / RECORDING_FILE)
     return validation.report.headline()
 
 
 STAGE = Stage(
     name="validate",
-    version=8,
+    version=9,
     description="exported policy + reference -> sim2sim report (nominal, randomized, other physics; "
     "tracking; filmstrip, video, plots, .rrd) beside zero-action",
     params=ValidationConfig,

@@ -221,5 +221,8 @@ def test_smoke_profile_trains_exports_and_validates(
             if not chunk.is_static:
                 rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
         steps = round(on_onnx["nominal"]["policy"]["start_zero"]["mean_survival_s"] * 50)
-        assert rows["/robot/tracked/pelvis"] == steps + 1 and rows["/robot/retarget/pelvis"] == 6575
+        # Every pose, and the mesh once at the first.
+        assert rows["/robot/tracked/pelvis"] == steps + 2 and rows["/robot/retarget/pelvis"] == 6575 + 1
         assert rows["/human/joints"] == 3945
+        # Its tracking errors plotted, one value per step it survived.
+        assert rows["/tracking/body_error_m"] == rows["/tracking/joint_error_rad"] == steps

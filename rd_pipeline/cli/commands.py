@@ -230,8 +230,9 @@ def _print_status_table(report: dict) -> None:
 
 
 def view(cmd: View, console: Console) -> int:
-    from rd_pipeline.viz.recording import TRACKED_FILE, record_motion
+    from rd_pipeline.viz.recording import record_motion
     from rd_pipeline.viz.rerun_view import display_available
+    from rd_pipeline.viz.tracked import TRACKED_FILE
 
     planned = _plan(cmd, console, (None, None, None))
     # Only the stages that make motion are needed; they are computed or taken from the cache.

@@ -30,6 +30,7 @@ from rd_pipeline.policy_spec import SPEC_FILE, PolicySpec, load_policy_spec
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.assets import asset_path
 from rd_pipeline.viz.render import Scene, render_pictures
+from rd_pipeline.viz.tracked import TrackedRollout
 
 
 @dataclass(frozen=True)
@@ -65,6 +66,21 @@ def rollout_pictures(validation: Validation, clip: ReferenceClip, look: RenderCo
     details = validation.report.details
     title = f"{details['robot']} {details['motion']}, policy {details['policy_key']}, nominal start-zero rollout"
     return render_pictures(validation.model, _rollout_scene(validation, clip, title), look, out_dir)
+
+
+def recorded_rollout(validation: Validation, clip: ReferenceClip) -> TrackedRollout:
+    """The policy's nominal start-zero rollout as the recordings show it: poses, errors, its end."""
+    tracked = validation.tracked
+    assert tracked.body_pos is not None and tracked.body_quat is not None  # the first rollout keeps its poses
+    return TrackedRollout(
+        body_pos=tracked.body_pos,
+        body_quat=tracked.body_quat,
+        first_frame=clip.start_frame + tracked.start_frame,
+        fps=clip.motion.fps,
+        body_error_m=tracked.errors["E_mpbpe"] / 1000.0,
+        joint_error_rad=tracked.errors["E_mpjpe"] / 1000.0,
+        ended_by=tracked.ended_by,
+    )
 
 
 def _rollout_scene(validation: Validation, clip: ReferenceClip, title: str) -> Scene:

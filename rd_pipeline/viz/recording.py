@@ -12,9 +12,25 @@ from rd_pipeline.motion.human import HUMAN_MOTION_FILE, HumanMotion
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.retarget.quality import QUALITY_SERIES_FILE
 from rd_pipeline.retarget.targets import TARGETS_FILE
-from rd_pipeline.viz.rerun_view import log_human, log_points, log_robot_meshes, log_series, open_recording
+from rd_pipeline.viz.layout import Follow, Plot, send_layout
+from rd_pipeline.viz.rerun_view import (
+    REFERENCE_COLOR,
+    TARGET_COLOR,
+    TRACKED_COLOR,
+    log_end,
+    log_human,
+    log_label,
+    log_points,
+    log_robot_meshes,
+    log_series,
+    open_recording,
+)
+from rd_pipeline.viz.tracked import TrackedRollout
 
-TARGET_COLOR = (220, 60, 60)
+SIDE_BY_SIDE_M = 1.0
+
+RULER_UNITS = {"_m_s": "speeds (m/s)", "_deg": "angles (deg)", "_m": "distances (m)"}
+"""The retargeting rulers by the unit their name ends with (body indices have none), one plot each."""
 
 
 def record_motion(
@@ -36,32 +52,56 @@ def record_motion(
     with open_recording(f"{robot}_{motion}", out) as rec:
         for path in human_files:
             log_human(rec, HumanMotion.load(path))
+        plots = []
+        follow = None
         for stage, path in reference_files:
-            _log_reference(rec, model, stage, path, tracked)
+            reference = ReferenceMotion.load(path)
+            plots += _log_reference(rec, model, stage, reference, path.parent, tracked)
+            follow = follow or _root(reference, f"robot/{stage}")
+        send_layout(rec, plots, follow)
     return out
 
 
-def _log_reference(rec, model, stage: str, path: Path, tracked: Path | None) -> None:
-    """One stage's robot reference, its IK targets and quality rulers, and the tracked robot."""
-    reference = ReferenceMotion.load(path)
-    _log_robot(rec, model, reference, f"robot/{stage}")
-    targets = path.parent / TARGETS_FILE
+def _root(reference: ReferenceMotion, entity: str) -> Follow:
+    """The reference robot's root body, for the camera to follow."""
+    return Follow(f"{entity}/{reference.body_names[0]}", reference.body_pos_w[0, 0])
+
+
+def _log_reference(
+    rec, model, stage: str, reference: ReferenceMotion, folder: Path, tracked: Path | None
+) -> list[Plot]:
+    """One stage's robot reference (its artifact in `folder`), its IK targets and quality rulers,
+    and the tracked robot; the plots of what it logged."""
+    _log_robot(rec, model, reference, f"robot/{stage}", f"reference ({stage})")
+    targets = folder / TARGETS_FILE
     if targets.is_file():
         with open_npz(targets) as data:
             log_points(rec, f"targets/{stage}", data["positions"], reference.fps, TARGET_COLOR, 0.015)
-    series = path.parent / QUALITY_SERIES_FILE
+    plots = []
+    series = folder / QUALITY_SERIES_FILE
     if series.is_file():
-        # The rulers as plots on the same timeline: a bad frame is a spike to click on.
-        with open_npz(series) as data:
-            for name in data.files:
-                if name.endswith(("_m", "_m_s", "_deg")):  # measures, not body indices
-                    log_series(rec, f"quality/{stage}/{name}", data[name], reference.fps)
+        plots += _log_rulers(rec, stage, series, reference.fps)
     if tracked is not None:
-        log_tracked(rec, model, reference, tracked, SIDE_BY_SIDE_M)
+        plots += log_tracked(rec, model, reference, TrackedRollout.load(tracked), SIDE_BY_SIDE_M)
+    return plots
 
 
-def _log_robot(rec, model, reference: ReferenceMotion, entity: str, first_frame: int = 0) -> None:
-    """The robot of a reference motion as meshes on the frame timeline."""
+def _log_rulers(rec, stage: str, series: Path, fps: float) -> list[Plot]:
+    """The rulers as plots on the same time axis, one per unit: a bad frame is a spike to click on."""
+    by_unit: dict[str, list[str]] = {}
+    with open_npz(series) as data:
+        for name in data.files:
+            unit = next((u for suffix, u in RULER_UNITS.items() if name.endswith(suffix)), None)
+            if unit is None:
+                continue
+            entity = f"quality/{stage}/{name}"
+            log_series(rec, entity, data[name], fps)
+            by_unit.setdefault(unit, []).append(entity)
+    return [Plot(f"{stage}: {unit}", tuple(entities)) for unit, entities in by_unit.items()]
+
+
+def _log_robot(rec, model, reference: ReferenceMotion, entity: str, label: str, first_frame: int = 0) -> None:
+    """The robot of a reference motion as meshes on the time axis, named above its root."""
     log_robot_meshes(
         rec,
         model,
@@ -72,45 +112,44 @@ def _log_robot(rec, model, reference: ReferenceMotion, entity: str, first_frame:
         entity,
         first_frame=first_frame,
     )
+    log_label(rec, entity, label, reference.body_pos_w[:, 0], reference.fps, REFERENCE_COLOR, first_frame)
 
 
-TRACKED_COLOR = (240, 150, 40)
-SIDE_BY_SIDE_M = 1.0
-TRACKED_FILE = "tracked.npz"
-"""Body poses of the start-zero sim2sim rollout, written by `validate` for recordings."""
-
-
-def save_tracked(path: Path, body_pos: np.ndarray, body_quat: np.ndarray, first_frame: int, fps: float) -> None:
-    np.savez(path, body_pos=body_pos, body_quat=body_quat, first_frame=first_frame, fps=fps)
-
-
-def log_tracked(rec, model, reference: ReferenceMotion, tracked: Path, offset_m: float = 0.0) -> None:
-    """The simulated robot of a `tracked.npz` on the reference's frame timeline, shifted `offset_m` along +y."""
-    with open_npz(tracked) as data:
-        body_pos = data["body_pos"]
-        body_quat = data["body_quat"]
-        first = int(data["first_frame"])
+def log_tracked(rec, model, reference: ReferenceMotion, tracked: TrackedRollout, offset_m: float = 0.0) -> list[Plot]:
+    """The simulated robot on the time axis, shifted `offset_m` along +y, its tracking errors as
+    plots, and, where it failed before the clip's end, its removal with the cause at that moment."""
     names = [n for n in reference.body_names if model.body(n).id > 0]
     ids = [model.body(n).id for n in names]
-    log_robot_meshes(
-        rec,
-        model,
-        names,
-        body_pos[:, ids] + np.array([0.0, offset_m, 0.0]),
-        body_quat[:, ids],
-        reference.fps,
-        "robot/tracked",
-        color=TRACKED_COLOR,
-        first_frame=first,
-    )
+    body_pos = tracked.body_pos[:, ids] + np.array([0.0, offset_m, 0.0])
+    first = tracked.first_frame
+    entity = "robot/tracked"
+    log_robot_meshes(rec, model, names, body_pos, tracked.body_quat[:, ids], tracked.fps, entity, TRACKED_COLOR, first)
+    log_label(rec, entity, "tracked (sim2sim)", body_pos[:, 0], tracked.fps, TRACKED_COLOR, first)
+    # Error k is measured after step k, at pose k + 1.
+    plots = [
+        _log_error(rec, "tracking/body_error_m", tracked.body_error_m, tracked, "tracking error: bodies (m)"),
+        _log_error(rec, "tracking/joint_error_rad", tracked.joint_error_rad, tracked, "tracking error: joints (rad)"),
+    ]
+    if tracked.ended_by:
+        # Gone one frame after its last pose, so that failing pose is still seen.
+        last = first + tracked.steps
+        seconds = (last + 1) / tracked.fps
+        cause = f"rollout ended at {last / tracked.fps:.2f} s: {tracked.ended_by}"
+        log_end(rec, entity, seconds, body_pos[-1, 0], cause)
+    return plots
 
 
-def record_tracking(
-    model, reference: ReferenceMotion, tracked: Path, name: str, out: Path, first_frame: int = 0
-) -> Path:
-    """The reference robot and the tracked (simulated) robot side by side on one timeline (the
-    tracked one shifted `SIDE_BY_SIDE_M` along +y); `reference` is a clip starting at `first_frame`."""
+def _log_error(rec, entity: str, values: np.ndarray, tracked: TrackedRollout, title: str) -> Plot:
+    log_series(rec, entity, values, tracked.fps, tracked.first_frame + 1, TRACKED_COLOR)
+    return Plot(title, (entity,))
+
+
+def record_tracking(model, reference: ReferenceMotion, tracked: Path, name: str, out: Path) -> Path:
+    """The reference robot and the tracked (simulated) robot side by side on one time axis (the
+    tracked one shifted `SIDE_BY_SIDE_M` along +y); `reference` is the clip the rollout started on."""
+    rollout = TrackedRollout.load(tracked)
     with open_recording(name, out) as rec:
-        _log_robot(rec, model, reference, "robot/reference", first_frame)
-        log_tracked(rec, model, reference, tracked, SIDE_BY_SIDE_M)
+        _log_robot(rec, model, reference, "robot/reference", "reference", rollout.first_frame)
+        plots = log_tracked(rec, model, reference, rollout, SIDE_BY_SIDE_M)
+        send_layout(rec, plots, _root(reference, "robot/reference"))
     return out
