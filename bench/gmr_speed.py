@@ -1,10 +1,10 @@
 """Benchmark: G1 retarget speed against GMR's, side by side, alone on one core, takes interleaved.
 
     python -m bench.gmr_speed --gmr-python /path/to/gmr-venv/bin/python --gmr-repo /path/to/GMR
-                              [--motions ...] [--rounds 2] [--core 0] [--out bench/results/gmr_speed]
+                              [--robot g1] [--motions ...] [--rounds 2] [--core 0] [--out bench/results/gmr_speed]
                               [--profile TAKE]
 
-GMR (General Motion Retargeting, github.com/YanjieZe/GMR) is not on PyPI and pins nothing, so it
+GMR (General Motion Retargeting, GitHub YanjieZe/GMR) is not on PyPI and pins nothing, so it
 gets a venv of its own, and nothing of it enters this project:
 
     git clone <GMR> GMR && python -m venv gmr-venv && gmr-venv/bin/pip install torch==2.13.0 \\
