@@ -82,6 +82,7 @@ def main() -> None:
     if not (args.gmr_python and args.gmr_repo):
         _parser().error("--gmr-python and --gmr-repo are required (see the module docstring)")
     motions = args.motions or shared_takes()
+    load_before = os.getloadavg()[0]
     runs: dict[str, dict[str, list[dict]]] = {motion: {"rd": [], "gmr": []} for motion in motions}
     for round_index in range(args.rounds):
         for motion in motions:
@@ -97,6 +98,8 @@ def main() -> None:
         "gmr_robot": "unitree_g1",
         "core": args.core,
         "rounds": args.rounds,
+        # The machine's 1-minute load before and after: well above 1 means something else shared it.
+        "load_avg_1min": [round(load_before, 2), round(os.getloadavg()[0], 2)],
         "takes": [_row(motion, runs[motion]) for motion in motions],
     }
     write_result(args.out, result, _table(result))
@@ -200,7 +203,7 @@ def _table(result: dict) -> str:
         f"seconds; rd/GMR = rd RTF / GMR RTF: median {statistics.median(ratios):.2f} ({min(ratios):.2f} to "
         f"{max(ratios):.2f}); rd at or above GMR on {at_or_above} of {len(ratios)} takes. Start = the wall less the "
         f"parts timed inside (interpreter, imports, store; GMR's start includes its imports). "
-        f"Commit {result['commit']}, GMR {result['gmr_commit']}."
+        f"Load average before and after {result['load_avg_1min']}. Commit {result['commit']}, GMR {result['gmr_commit']}."
     )
     return "\n".join(lines) + "\n"
 
