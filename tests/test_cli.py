@@ -75,6 +75,7 @@ def test_a_choice_outside_its_literal_is_refused_when_params_are_read(artifacts:
     assert not (artifacts / "import").exists()
 
 
+@pytest.mark.slow
 def test_a_qp_solver_that_is_not_installed_is_one_line(artifacts: Path) -> None:
     result = cli("run", "--until", "retarget", "--set", "retarget.ik.solver=osqpx")
     assert result.returncode == 2

@@ -68,6 +68,7 @@ def test_two_ranks_keep_identical_weights_and_a_resumed_run_continues_bit_for_bi
     assert [r["env"]["rng"] for r in again["ranks"]] == [r["env"]["rng"] for r in saved["ranks"]]
 
 
+@pytest.mark.slow
 def test_a_checkpoint_continues_only_with_the_ranks_that_made_it(tmp_path: Path) -> None:
     single = replace(CONFIG, iterations=1, ranks=1)
     run_job(h1_2_dance_job(single, tmp_path / "one"), lambda row: None)

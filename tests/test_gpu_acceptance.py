@@ -49,6 +49,7 @@ def bench_result(tmp_path_factory: pytest.TempPathFactory) -> dict:
     return result
 
 
+@pytest.mark.slow
 def test_warp_matches_c_mujoco_on_randomized_models_with_pushes(bench_result: dict) -> None:
     equality = bench_result["c_backend_equality"]
     assert equality["control_steps"] == 10 and equality["envs"] == 4
@@ -60,6 +61,7 @@ def test_warp_matches_c_mujoco_on_randomized_models_with_pushes(bench_result: di
     assert abs(peaks["c"] - peaks["warp"]) <= 2 and peaks["c"] > 0
 
 
+@pytest.mark.slow
 def test_bench_reports_the_cpu_fallback_and_throughput(bench_result: dict) -> None:
     reason = bench_result["capture"]["fallback_reason"]
     assert "'cpu' is not a CUDA device" in reason and not bench_result["capture"]["graphs"]
@@ -82,6 +84,7 @@ def test_bench_reports_the_cpu_fallback_and_throughput(bench_result: dict) -> No
     assert envs["memory"] == {"torch_max_allocated_mib": None, "warp_mempool_high_mib": None}
 
 
+@pytest.mark.slow
 def test_bench_trains_and_monitors_overflow(bench_result: dict) -> None:
     (envs,) = bench_result["envs"]
     training = envs["training"]

@@ -166,6 +166,7 @@ def test_a_damaged_csv_is_named_at_its_file_line(damage: str, message: str, tmp_
     assert str(error.value) == message.format(path=path)
 
 
+@pytest.mark.slow
 def test_cli_import_writes_the_reference_artifact(artifacts: Path) -> None:
     result = cli("stage", "import", "--robot", "h1_2", "--motion", "dance2_subject4")
     assert result.returncode == 0, result.stderr
@@ -176,6 +177,7 @@ def test_cli_import_writes_the_reference_artifact(artifacts: Path) -> None:
     assert '"fps": 50.0' in manifest and '"frames": 11285' in manifest
 
 
+@pytest.mark.slow
 def test_renormalised_quaternions_are_counted_in_a_warning(tmp_path: Path) -> None:
     rows = (RETARGETED_DIR / "h1" / "dance1_subject1.csv").read_text().splitlines()
     for line in (10, 11, 500):  # three rows with their quaternion scaled by 1.5

@@ -25,6 +25,7 @@ def _exported(artifacts: Path, tmp_path: Path, robot: str, motion: str) -> tuple
     return out, ReferenceMotion.load(folder / "reference.npz")
 
 
+@pytest.mark.slow
 def test_csv_round_trip_is_the_same_motion_within_interpolation_error(artifacts: Path, tmp_path: Path) -> None:
     out, reference = _exported(artifacts, tmp_path, "h1_2", "dance2_subject4")
     robot = load_robot("h1_2")
@@ -39,6 +40,7 @@ def test_csv_round_trip_is_the_same_motion_within_interpolation_error(artifacts:
     assert np.percentile(turned.magnitude(), 99) < 0.01
 
 
+@pytest.mark.slow
 def test_csv_has_the_dataset_layout(artifacts: Path, tmp_path: Path) -> None:
     """The imported G1 motion written back equals the 29-joint dataset file it came from, except the
     six joints the 23-DoF model lacks (waist roll and pitch, wrist pitch and yaw: written as 0) and
@@ -65,6 +67,7 @@ def test_a_bad_rate_is_one_line(artifacts: Path, tmp_path: Path, fps: str) -> No
     assert not out.exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("format", ["csv", "mjlab"])
 def test_an_unwritable_out_is_one_line_and_leaves_no_partial_file(format: str, artifacts: Path, tmp_path: Path) -> None:
     taken = tmp_path / "out" / "taken"
@@ -76,6 +79,7 @@ def test_an_unwritable_out_is_one_line_and_leaves_no_partial_file(format: str, a
     assert [path.name for path in taken.parent.iterdir()] == ["taken"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("robot_name", "fps"), [("g1", None), ("h1_2", 30.0)])
 def test_mjlab_npz_follows_the_task_model_order_and_its_kinematics(
     robot_name: str, fps: float | None, artifacts: Path, tmp_path: Path

@@ -88,6 +88,7 @@ def test_a_truncated_artifact_is_reported_and_recomputed(artifacts: Path) -> Non
     assert _states("h1_2", "dance2_subject4")["import"]["state"] == "cached"
 
 
+@pytest.mark.slow
 def test_a_key_folder_without_its_manifest_is_replaced_by_the_rerun(artifacts: Path) -> None:
     assert cli(*CSV_RUN).returncode == 0
     (folder,) = list((artifacts / "import" / "h1_2" / "dance2_subject4").iterdir())
@@ -235,6 +236,7 @@ def test_quickstart_without_data_says_in_one_line_how_to_get_it(tmp_path: Path) 
     assert "Traceback" not in result.stderr
 
 
+@pytest.mark.slow
 def test_user_text_is_printed_literally(tmp_path: Path) -> None:
     """Paths, names and file:line positions are neither rich markup nor emoji codes."""
     store = tmp_path / "a[bold]b"
@@ -270,6 +272,7 @@ def test_an_unwritable_store_is_one_line_naming_it(store: str, tmp_path: Path) -
         assert "Traceback" not in result.stderr
 
 
+@pytest.mark.slow
 def test_a_cached_run_checks_the_hashes_it_reports_and_status_fails_on_damage(artifacts: Path) -> None:
     until_import = ("run", "--robot", "h1_2", "--motion", "dance2_subject4", "--until", "import")
     assert cli(*until_import).returncode == 0
@@ -290,6 +293,7 @@ def test_a_cached_run_checks_the_hashes_it_reports_and_status_fails_on_damage(ar
     assert cli(*status, "--verify").returncode == 0
 
 
+@pytest.mark.slow
 def test_the_data_folders_come_from_rd_pipeline_toml_without_variables(tmp_path: Path) -> None:
     """What quickstart records beside the data, the CLI reads in a fresh shell, from any folder below."""
     checkout = tmp_path / "checkout"

@@ -54,6 +54,7 @@ def g1_dance() -> RetargetResult:
     return _retarget("g1", _human("dance1_subject2", seconds=25.0))
 
 
+@pytest.mark.slow
 def test_constraints_hold_on_a_real_clip(g1_dance: RetargetResult) -> None:
     robot = load_robot("g1")
     q = retarget_quality(
@@ -75,6 +76,7 @@ def test_constraints_hold_on_a_real_clip(g1_dance: RetargetResult) -> None:
     assert 5.0 < q["planted_foot_turn_p95_deg"] < 14.0
 
 
+@pytest.mark.slow
 def test_planted_feet_stay_put_and_follow_their_sole_target(g1_dance: RetargetResult) -> None:
     reference = g1_dance.reference
     robot = load_robot("g1")
@@ -398,6 +400,7 @@ def test_a_catch_up_that_stops_gaining_ends_early(monkeypatch) -> None:
     assert abs(errors[params.repair.catch_up_min_gain_m] - errors[-np.inf]) < 0.002
 
 
+@pytest.mark.slow
 def test_a_fast_fall_does_not_fold_a_leg_onto_its_alias() -> None:
     # H1-2's model lets a hip pitch 2.5 rad back. Played 1.3x fast, the push and fall lagged, the
     # IK swung the right leg back to that bound and then rolled it half a turn: the knee where the

@@ -50,6 +50,7 @@ def excerpt(request) -> tuple[str, RetargetResult, dict, dict]:
     return request.param, result, series, summarize_quality(robot, result.reference, series)
 
 
+@pytest.mark.slow
 def test_the_issue_bars_hold(excerpt) -> None:
     name, _, _, quality = excerpt
     assert quality["penetration_max_mm"] <= 10.0, name
@@ -61,11 +62,13 @@ def test_the_issue_bars_hold(excerpt) -> None:
     assert quality["diverged_frames"] == 0, name
 
 
+@pytest.mark.slow
 def test_root_is_no_faster_than_the_human(excerpt) -> None:
     name, _, _, quality = excerpt
     assert quality["root_speed_p999_m_s"] <= 1.6 * quality["human_root_speed_p999_m_s"], name
 
 
+@pytest.mark.slow
 def test_low_human_low_robot(excerpt) -> None:
     """Where the scaled human hips are within 0.3 m of the floor, the robot pelvis is close (no floating);
     where they are high, the robot's are too (no collapse)."""
@@ -83,6 +86,7 @@ def test_low_human_low_robot(excerpt) -> None:
     assert robot_z.min() > 0.0, name
 
 
+@pytest.mark.slow
 def test_robot_tilts_and_rises_with_the_human(excerpt) -> None:
     """The pelvis follows the human's tilt (lying, on all fours) and stands again when the human does."""
     name, result, _, _ = excerpt
@@ -103,6 +107,7 @@ def test_robot_tilts_and_rises_with_the_human(excerpt) -> None:
         assert reference.body_pos_w[-25:, pelvis, 2].min() > 0.5, name
 
 
+@pytest.mark.slow
 def test_body_contacts_rest_on_the_floor(excerpt) -> None:
     """Knees, hands or trunk rest on the floor in every excerpt; while resting, the robot body is on it."""
     name, result, series, _ = excerpt
@@ -117,6 +122,7 @@ def test_body_contacts_rest_on_the_floor(excerpt) -> None:
     assert series["penetration_m"].max() <= 0.010, name
 
 
+@pytest.mark.slow
 def test_a_stretch_stuck_on_the_wrong_branch_is_solved_again() -> None:
     """Solved from 61 s of ground2, where the human is down on hands and feet, the forward IK starts
     from the standing default pose and stays bent over it for about a second (pelvis far above the

@@ -63,10 +63,12 @@ def slack_pelvis() -> dict:
     return _quality(RetargetConfig().ik.pelvis_slack_m)
 
 
+@pytest.mark.slow
 def test_without_slack_the_planted_feet_slide(fixed_pelvis):
     assert fixed_pelvis["skate_stance_mean_mm_s"] > 40.0
 
 
+@pytest.mark.slow
 def test_pelvis_slack_keeps_planted_feet_within_half_the_slide(fixed_pelvis, slack_pelvis):
     assert RetargetConfig().ik.pelvis_slack_m == 0.03
     assert slack_pelvis["skate_stance_mean_mm_s"] < 0.5 * fixed_pelvis["skate_stance_mean_mm_s"]

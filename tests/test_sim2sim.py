@@ -160,6 +160,7 @@ def test_the_tracked_share_counts_steps_within_both_tolerances(standing: Standin
     assert seconds[1]["joint_rad"] is None and seconds[1]["tracked_pct"] == 0.0
 
 
+@pytest.mark.slow
 def test_the_pictures_show_the_rollout_moving_beside_its_reference(standing: Standing, tmp_path) -> None:
     (rollout, *_) = _zero_grid(standing, None, [standing.model] * 3)
     frames = np.arange(standing.reference.n_frames)

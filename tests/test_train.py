@@ -94,6 +94,7 @@ def test_the_keypoint_rewards_track_the_torso_and_both_hands() -> None:
     assert keypoints == ["torso_link", "left_wrist_yaw_link", "right_wrist_yaw_link"]
 
 
+@pytest.mark.slow
 def test_a_reward_weight_and_a_termination_threshold_set_on_the_command_line_change_key_and_behaviour(
     artifacts: Path,
 ) -> None:

@@ -147,6 +147,7 @@ def _reference_states(
     return torch.from_numpy(qpos), torch.zeros(len(frames), model.nv, dtype=torch.float64), torch.from_numpy(targets)
 
 
+@pytest.mark.slow
 def test_ppo_trains_through_the_warp_backend(tmp_path) -> None:
     """A few PPO iterations end to end with physics in MuJoCo Warp (on Warp's CPU device here, on
     a GPU in the `paper` profile): the same environment, state as torch tensors from Warp."""
