@@ -16,8 +16,6 @@ from __future__ import annotations
 import argparse
 import io
 import json
-import os
-import subprocess
 import sys
 import tempfile
 from collections.abc import Callable
@@ -27,6 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rd_pipeline.errors import PipelineError
+from rd_pipeline.viz.render import render_in_child
 
 if TYPE_CHECKING:
     # Imported where it renders: this process's MuJoCo is not the one `MUJOCO_GL` chose.
@@ -34,7 +33,8 @@ if TYPE_CHECKING:
 
 DEFAULT_TIMES = (67.0, 69.0, 70.0, 71.0, 72.0, 73.5)
 """A lively stretch of dance1_subject2: kicks, lunges, both arms up, a deep crouch."""
-GL_BACKENDS = ("egl", "osmesa")
+RENDER_TIMEOUT_S = 600.0
+"""How long the child may take to render every frame."""
 FRAMES_FILE = "frames.npz"
 META_FILE = "frames.json"
 WIDTH, HEIGHT = 340, 400
@@ -106,16 +106,10 @@ def _frame_indices(times: list[float], fps: float, count: int) -> np.ndarray:
 
 def _render_headless(work: Path, out: Path) -> None:
     """Render in a child process per OpenGL backend until one works."""
-    why = "no offscreen OpenGL"
-    for backend in GL_BACKENDS:
-        env = {**os.environ, "MUJOCO_GL": backend, "PYOPENGL_PLATFORM": backend}
-        command = [sys.executable, "-m", "scripts.retarget_picture", "--render-from", str(work), "--out", str(out)]
-        done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=600, check=False)
-        if done.returncode == 0:
-            return
-        lines = done.stderr.strip().splitlines() or [f"exit {done.returncode}"]
-        why = f"MUJOCO_GL={backend}: {lines[-1]}"
-    raise PipelineError(f"could not render: {why}")
+    command = [sys.executable, "-m", "scripts.retarget_picture", "--render-from", str(work), "--out", str(out)]
+    why = render_in_child(command, RENDER_TIMEOUT_S)
+    if why:
+        raise PipelineError(f"could not render: {why}")
 
 
 # --- the child: MuJoCo with the backend `MUJOCO_GL` chose ---

@@ -64,23 +64,30 @@ def render_pictures(model: mujoco.MjModel, scene: Scene, look: RenderConfig, out
     np.savez(work / SCENE_FILE, tracked=scene.tracked, reference=scene.reference)
     meta = {**asdict(look), "title": scene.title, "control_hz": scene.control_hz, "ended_by": scene.ended_by}
     (work / "scene.json").write_text(json.dumps(meta))
-    why = "no offscreen OpenGL"
+    command = [sys.executable, "-m", "rd_pipeline.viz.render", str(work), str(out_dir)]
     try:
-        for backend in GL_BACKENDS:
-            env = {**os.environ, "MUJOCO_GL": backend, "PYOPENGL_PLATFORM": backend}
-            command = [sys.executable, "-m", "rd_pipeline.viz.render", str(work), str(out_dir)]
-            done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=look.timeout_s, check=False)
-            if done.returncode == 0:
-                return {"filmstrip": FILMSTRIP_FILE, "video": VIDEO_FILE}
-            lines = done.stderr.strip().splitlines() or [f"exit {done.returncode}"]
-            why = f"MUJOCO_GL={backend}: {lines[-1]}"
+        why = render_in_child(command, look.timeout_s)
     except subprocess.TimeoutExpired:
         why = f"rendering took over {look.timeout_s:g} s"
     finally:
         for path in work.iterdir():
             path.unlink()
         work.rmdir()
-    return {"skipped": why}
+    return {"skipped": why} if why else {"filmstrip": FILMSTRIP_FILE, "video": VIDEO_FILE}
+
+
+def render_in_child(command: list[str], timeout_s: float) -> str | None:
+    """Run `command` (a renderer) once per OpenGL backend until one works: None then, else why
+    the last one failed. Each try is a process of its own, as MuJoCo picks its backend at import."""
+    why = "no offscreen OpenGL"
+    for backend in GL_BACKENDS:
+        env = {**os.environ, "MUJOCO_GL": backend, "PYOPENGL_PLATFORM": backend}
+        done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=timeout_s, check=False)
+        if done.returncode == 0:
+            return None
+        lines = done.stderr.strip().splitlines() or [f"exit {done.returncode}"]
+        why = f"MUJOCO_GL={backend}: {lines[-1]}"
+    return why
 
 
 def _main(work: Path, out_dir: Path) -> None:
