@@ -15,11 +15,10 @@ from typing import Any
 from rd_pipeline.api.workspace import training_log, training_seconds, training_seconds_per_run
 
 
-def head_commit() -> str:
-    """The checkout's commit, when the bench runs from one (an installed copy has none: "unknown")."""
-    git = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent
-    )
+def head_commit(checkout: Path = Path(__file__).parent) -> str:
+    """The commit of `checkout` (by default the one the bench runs from; an installed copy has
+    none: "unknown")."""
+    git = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=checkout)
     return git.stdout.strip() or "unknown"
 
 

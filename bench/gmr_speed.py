@@ -93,7 +93,7 @@ def main() -> None:
             print(f"round {round_index + 1} {motion}: rd {rd:.1f} s, gmr {gmr:.1f} s", flush=True)
     result = {
         "commit": head_commit(),
-        "gmr_commit": _git_commit(args.gmr_repo),
+        "gmr_commit": head_commit(args.gmr_repo),
         "robot": args.robot,
         "gmr_robot": "unitree_g1",
         "core": args.core,
@@ -273,11 +273,6 @@ def _short(filename: str) -> str:
         if package in filename:
             return package[1:] + filename.split(package, 1)[1]
     return Path(filename).name if filename.startswith("/") else filename
-
-
-def _git_commit(repo: Path) -> str:
-    git = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=repo)
-    return git.stdout.strip() or "unknown"
 
 
 def _parser() -> argparse.ArgumentParser:
