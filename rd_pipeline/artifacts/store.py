@@ -154,14 +154,13 @@ class ArtifactStore:
         whole artifact that run made, or, after clearing what a killed run left, a folder to write
         into (see `writing`). With `redo` an existing artifact is made again and replaced."""
         with self.locked(stage, robot, motion, key, on_wait):
-            found = None if redo else self.find(stage, robot, motion, key)
+            found = self.find(stage, robot, motion, key)
             work = self.work_folder(stage, robot, motion, key)
-            if found is not None and found.damage(full=True) is None:
+            if found is not None and not redo and found.damage(full=True) is None:
                 yield Claim(found, None, work)
                 return
             self.remove_abandoned(stage, robot, motion, key)
-            replace = self.find(stage, robot, motion, key) is not None
-            with self.writing(stage, robot, motion, key, replace=replace) as out:
+            with self.writing(stage, robot, motion, key, replace=found is not None) as out:
                 yield Claim(None, out, work)
 
     @contextmanager
