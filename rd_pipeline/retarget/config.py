@@ -42,6 +42,9 @@ class TargetShaping:
     """Gaussian sigma (s) on the direction between the feet that the spreading pushes along."""
     planted_tilt_rad: float = 0.35
     """A planted human foot tilted more than this (kneeling, heel up) takes on the human's tilt, fully at twice it."""
+    hold_planted_tilt: bool = True
+    """A tilted plant keeps one orientation, the mean of the human's over the plant, rather than
+    following the human's foot as it turns on its toes."""
     plant_drift: PlantDrift = PlantDrift()
     """When a long plant is cut by a short swing (a shuffle step the contact label missed)."""
 
@@ -120,6 +123,10 @@ class IkWeights:
 class IkConfig:
     """How the per-frame solve runs."""
 
+    solve_at_capture_rate: bool = True
+    """Solve the capture's own frames (LAFAN1: 30 per second; at most the output rate) and
+    resample the solved motion to the output rate, instead of solving every output frame. A
+    capture holds nothing between its frames, and every pass costs per frame solved."""
     iterations: int = 2
     """Solver iterations per frame (warm started from the previous frame)."""
     first_frame_iterations: int = 50

@@ -143,8 +143,23 @@ class RetargetIk:
                 self.step_limit.narrow(carried - correction_step, carried + correction_step)
             for _ in range(self.settings.refine_iterations):
                 self._iterate(tasks)
-            out[t] = self._clipped(self.configuration.q)
+            out[t] = self._checked_clip(smoothed[t])
         return out
+
+    def _checked_clip(self, fallback: np.ndarray) -> np.ndarray:
+        """The current pose clipped into the frame's joint bounds, or `fallback` where the clip
+        (which no collision check saw) pushes a configured body pair past the hard depth limit.
+
+        A refinement that starts outside its narrowed bounds is clipped back into them after its
+        iteration; on G1 ground2_subject3 that put a knee 6 mm into the other leg."""
+        q = self.configuration.q
+        clipped = self._clipped(q)
+        if np.array_equal(clipped, q):
+            return clipped
+        self.configuration.update(clipped)
+        if self._pair_depth() > self.settings.pair_depth_limit_m:
+            return fallback.copy()
+        return clipped
 
     def planted_foot_misses(self, qpos: np.ndarray) -> np.ndarray:
         """(T,) how far (m) the farthest planted foot of each row of `qpos` is from its target (0 when

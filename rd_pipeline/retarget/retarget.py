@@ -15,7 +15,7 @@ from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.retarget.ik import RetargetIk
 from rd_pipeline.retarget.quality import FootMeshes, colliding_frames
 from rd_pipeline.retarget.repair import repair_lag
-from rd_pipeline.retarget.smoothing import blend_configurations, smooth_cover
+from rd_pipeline.retarget.smoothing import blend_configurations, resample_configurations, smooth_cover
 from rd_pipeline.retarget.targets import RetargetTargets, build_targets
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.hulls import BodyHulls
@@ -56,23 +56,29 @@ def retarget(
     if human.duration_s < 1.0 / fps:
         raise PipelineError(f"clip of {human.duration_s:.4f} s is shorter than one frame period (1/{fps:g} s)")
     feet = FootMeshes.from_robot(robot)
-    targets = build_targets(human, robot, fps, feet.vertices, params.contact, params.shape, params.body_contact)
+    # The capture holds nothing between its frames, and the IK's cost is per frame: solve the
+    # capture's own frames and resample the solved motion to the output rate.
+    rate = min(human.fps, fps) if settings.solve_at_capture_rate else fps
+    targets = build_targets(human, robot, rate, feet.vertices, params.contact, params.shape, params.body_contact)
     hulls = BodyHulls.from_robot(robot)
     ik = RetargetIk(robot, targets, params.weights, settings, hulls)
     qpos = ik.solve(track(range(targets.n_frames), targets.n_frames, "whole-body IK"))
     qpos, repaired = repair_lag(ik, qpos, params.repair)
     if settings.trajectory_smoothing_s > 0:
-        smoothed = _smooth_trajectory(robot, qpos, settings.trajectory_smoothing_s * fps)
+        smoothed = _smooth_trajectory(robot, qpos, settings.trajectory_smoothing_s * rate)
         # Smoothing knows nothing of self-collision: where it brings a pair well inside the margin
         # the IK kept, ease back to the IK solution for those frames.
         clearance = settings.smoothed_pair_fraction * settings.collision_margin_m
         close = colliding_frames(robot, smoothed, -clearance)
-        keep_ik = np.minimum(smooth_cover(close.astype(float), fps, settings.ik_blend_s), 1.0)
+        keep_ik = np.minimum(smooth_cover(close.astype(float), rate, settings.ik_blend_s), 1.0)
         qpos = blend_configurations(smoothed, qpos, keep_ik)
         refined = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames, "feet on the smoothed motion"))
         if settings.pelvis_slack_m > 0:
             refined = _pelvis_slack(ik, qpos, refined)
         qpos = refined
+    if rate != fps:
+        targets = build_targets(human, robot, fps, feet.vertices, params.contact, params.shape, params.body_contact)
+        qpos = _resampled(robot, qpos, rate, np.arange(targets.n_frames) / fps, settings.pair_depth_limit_m)
     reference = _reference(robot, qpos, targets)
     # The IK keeps every body above the floor; smoothing can still dip a body by a few millimetres.
     sink = hulls.sink_depth(reference.body_pos_w, reference.body_quat_w, reference.body_names)
@@ -104,6 +110,22 @@ def _pelvis_slack(ik: RetargetIk, smoothed: np.ndarray, refined: np.ndarray) -> 
     moved[:, :3] += shift
     changed = np.flatnonzero(np.any(shift != 0.0, axis=1))
     return ik.refine_feet(moved, changed, start=refined)
+
+
+def _resampled(robot: Robot, qpos: np.ndarray, rate: float, times: np.ndarray, depth_m: float) -> np.ndarray:
+    """`qpos` (solved at `rate`) read at `times`; where a read pose brings a configured body pair
+    deeper than `depth_m` into contact (a hand sweeping past the torso between two solved frames
+    that both kept it clear), it is blended towards the nearest solved frame, a quarter at a time,
+    until the pair is clear."""
+    out = resample_configurations(qpos, rate, times)
+    for j in np.flatnonzero(colliding_frames(robot, out, depth_m)):
+        nearest = qpos[min(int(round(times[j] * rate)), len(qpos) - 1)]
+        for weight in (0.25, 0.5, 0.75, 1.0):
+            candidate = blend_configurations(out[j : j + 1], nearest[None], np.array([weight]))
+            if not colliding_frames(robot, candidate, depth_m)[0]:
+                break
+        out[j] = candidate[0]
+    return out
 
 
 def _smooth_trajectory(robot: Robot, qpos: np.ndarray, sigma: float) -> np.ndarray:

@@ -35,3 +35,14 @@ def blend_configurations(base: np.ndarray, other: np.ndarray, weight: np.ndarray
     quat = (1.0 - w) * base[:, 3:7] + w * quat_other
     out[:, 3:7] = quat / np.linalg.norm(quat, axis=1, keepdims=True)
     return out
+
+
+def resample_configurations(qpos: np.ndarray, fps: float, times: np.ndarray) -> np.ndarray:
+    """Free-base configurations (T, nq) sampled at `fps`, read at `times` (s, within the clip):
+    positions and joints linearly, the root quaternion by the same blend in its hemisphere,
+    normalized. Linear reading never raises a frame-to-frame speed above the fastest step of
+    `qpos`, so the velocity limits it kept still hold."""
+    position = np.clip(times * fps, 0.0, len(qpos) - 1)
+    before = np.minimum(np.floor(position).astype(int), len(qpos) - 1)
+    after = np.minimum(before + 1, len(qpos) - 1)
+    return blend_configurations(qpos[before], qpos[after], position - before)
