@@ -42,9 +42,6 @@ class TargetShaping:
     """Gaussian sigma (s) on the direction between the feet that the spreading pushes along."""
     planted_tilt_rad: float = 0.35
     """A planted human foot tilted more than this (kneeling, heel up) takes on the human's tilt, fully at twice it."""
-    hold_planted_tilt: bool = True
-    """A tilted plant keeps one orientation, the mean of the human's over the plant, rather than
-    following the human's foot as it turns on its toes."""
     plant_drift: PlantDrift = PlantDrift()
     """When a long plant is cut by a short swing (a shuffle step the contact label missed)."""
 

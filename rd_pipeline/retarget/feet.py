@@ -71,7 +71,7 @@ def plant_foot(
     heading = _planted_heading(forward, plants, pelvis_yaw, yaw_range)
     flat = Rotation.from_matrix(yaw_pitch_frame(heading, np.zeros(n)))
     swinging = _swing_orientation(human_rotation, flat, contact)
-    flat = _keep_planted_tilt(flat, swinging, plants, shape.planted_tilt_rad, shape.hold_planted_tilt)
+    flat = _keep_planted_tilt(flat, swinging, plants, shape.planted_tilt_rad)
     position = free.copy()
     for plant in plants:
         position[plant.start : plant.end] = plant.point
@@ -127,13 +127,7 @@ def _swing_orientation(human_rotation: np.ndarray, flat: Rotation, contact: np.n
     return human * offset
 
 
-def _keep_planted_tilt(
-    flat: Rotation,
-    swinging: Rotation,
-    plants: list[_Plant],
-    tilt_limit: float,
-    hold_tilt: bool,
-) -> Rotation:
+def _keep_planted_tilt(flat: Rotation, swinging: Rotation, plants: list[_Plant], tilt_limit: float) -> Rotation:
     """A foot planted on its toes or its instep (kneeling, crouching) keeps the human's tilt:
     laying it flat would lift the knees off the floor."""
     tilt = np.arccos(np.clip(swinging.as_matrix()[:, 2, 2], -1.0, 1.0))
@@ -142,12 +136,7 @@ def _keep_planted_tilt(
         run = slice(plant.start, plant.end)
         if tilted[run].any():
             delta = (flat[run].inv() * swinging[run]).as_rotvec()
-            kept = flat[run] * Rotation.from_rotvec(delta * tilted[run, None])
-            if hold_tilt:
-                # One orientation for the whole plant: a foot turning on its toes moves its
-                # origin (and its heel) along the floor, which is skate.
-                kept = Rotation.from_quat(np.tile(kept.mean().as_quat(), (plant.end - plant.start, 1)))
-            flat = _assign(flat, run, kept)
+            flat = _assign(flat, run, flat[run] * Rotation.from_rotvec(delta * tilted[run, None]))
     return flat
 
 
