@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from rd_pipeline.motion.contact import contact_runs
 from rd_pipeline.motion.human import HumanMotion
@@ -71,14 +72,10 @@ def _twin_index(names: tuple[str, ...], name: str) -> int:
 
 
 def _matrices(quat_wxyz: np.ndarray) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
     flat = quat_wxyz.reshape(-1, 4)[:, [1, 2, 3, 0]]
     return Rotation.from_quat(flat).as_matrix().reshape(*quat_wxyz.shape[:-1], 3, 3)
 
 
 def _quaternions(matrices: np.ndarray) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
-
     flat = Rotation.from_matrix(matrices.reshape(-1, 3, 3)).as_quat()[:, [3, 0, 1, 2]]
     return flat.reshape(*matrices.shape[:-2], 4)

@@ -56,8 +56,8 @@ def retarget(
     if human.duration_s < 1.0 / fps:
         raise PipelineError(f"clip of {human.duration_s:.4f} s is shorter than one frame period (1/{fps:g} s)")
     feet = FootMeshes.from_robot(robot)
-    # The capture holds nothing between its frames, and the IK's cost is per frame: solve the
-    # capture's own frames and resample the solved motion to the output rate.
+    # With `solve_at_capture_rate` only the capture's own frames are solved (it holds nothing
+    # between them, and every pass costs per frame), then resampled to the output rate.
     rate = min(human.fps, fps) if settings.solve_at_capture_rate else fps
     targets = build_targets(human, robot, rate, feet.vertices, params.contact, params.shape, params.body_contact)
     hulls = BodyHulls.from_robot(robot)
