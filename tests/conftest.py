@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
 import signal
@@ -33,7 +34,13 @@ MISSING_DATA = [str(p) for p in (LAFAN_DIR, RETARGETED_DIR, ROBOT_ASSETS) if not
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Without the real data every test that reads it is skipped, saying which folder is missing."""
+    """Test files holding the most slow tests first, so the two workers end together on the fast
+    files (each file's tests keep their order); without the real data every test that reads it is
+    skipped, saying which folder is missing."""
+    slow_tests: dict[Path, int] = {}
+    for item in items:
+        slow_tests[item.path] = slow_tests.get(item.path, 0) + ("slow" in item.keywords)
+    items.sort(key=lambda item: -slow_tests[item.path])
     if not MISSING_DATA:
         return
     reason = (
@@ -53,9 +60,10 @@ def artifacts(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 
 
 class ReferenceSeeds:
-    """The parse and retarget artifacts of a BVH take, made once per test worker and copied into a
-    test's store: tests of the stages after retargeting start where a user's second run does, and
-    the suite retargets each take it uses once per worker instead of once per test."""
+    """The parse and retarget artifacts of a BVH take, made once per test session and copied into
+    a test's store: tests of the stages after retargeting start where a user's second run does, and
+    the suite retargets each take it uses once instead of once per test. The test workers share
+    the seeds: the first to need a take makes it while the others wait on its lock."""
 
     def __init__(self, root: Path) -> None:
         self.root = root
@@ -63,11 +71,14 @@ class ReferenceSeeds:
     def into(self, store: Path, robot: str, motion: str) -> Path:
         """Copy `robot`/`motion`'s reference artifacts (default retarget params) into `store`."""
         seed = self.root / robot / motion
-        if not (seed / "retarget").is_dir():
-            made = cli(
-                "run", "--robot", robot, "--motion", motion, "--until", "retarget", env={"RD_ARTIFACTS": str(seed)}
-            )
-            assert made.returncode == 0, made.stderr
+        seed.mkdir(parents=True, exist_ok=True)
+        with (self.root / f"{robot}-{motion}.lock").open("w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not (seed / "retarget").is_dir():
+                made = cli(
+                    "run", "--robot", robot, "--motion", motion, "--until", "retarget", env={"RD_ARTIFACTS": str(seed)}
+                )
+                assert made.returncode == 0, made.stderr
         for stage in ("parse", "retarget"):
             shutil.copytree(seed / stage, store / stage, dirs_exist_ok=True)
         return store
@@ -75,7 +86,12 @@ class ReferenceSeeds:
 
 @pytest.fixture(scope="session")
 def reference_seeds(tmp_path_factory: pytest.TempPathFactory) -> ReferenceSeeds:
-    return ReferenceSeeds(tmp_path_factory.mktemp("reference_seeds"))
+    # Under xdist, beside the workers' own temporary folders: the same for every worker of this
+    # session (and of no other).
+    base = tmp_path_factory.getbasetemp()
+    shared = (base.parent if "PYTEST_XDIST_WORKER" in os.environ else base) / "reference_seeds"
+    shared.mkdir(exist_ok=True)
+    return ReferenceSeeds(shared)
 
 
 @pytest.fixture
@@ -159,3 +175,38 @@ def video_frames(path: Path) -> list[np.ndarray]:
     reader = imageio_ffmpeg.read_frames(str(path))
     width, height = next(reader)["size"]
     return [np.frombuffer(frame, np.uint8).reshape(height, width, 3) for frame in reader]
+
+
+def check_smoke_training_and_export(artifacts: Path, robot: str, motion: str) -> None:
+    """What a smoke run to export left in `artifacts`: two scored iterations, the paper's selective
+    residuals, the last checkpoint exported unless `export.best_by` ranks them."""
+    import json
+
+    from rd_pipeline.training.log import read_training_log
+
+    (folder,) = (artifacts / "train" / robot / motion).iterdir()
+    assert (folder / "learning_curve.png").is_file() and (folder / "checkpoints" / "model_2.pt").is_file()
+    metrics = json.loads((folder / "manifest.json").read_text())["metrics"]
+    assert metrics["iterations"] == 2 and metrics["num_envs"] == 8
+    # The paper's selective residuals: one output per policy joint, residual on hip and knee pitch,
+    # absolute on every other joint.
+    (exported,) = (artifacts / "export" / robot / motion).iterdir()
+    action = json.loads((exported / "policy.json").read_text())["action"]
+    assert action["mode"] == "selective"
+    assert len(action["outputs"]) == {"g1": 23, "h1": 19, "h1_2": 21}[robot] == metrics["num_actions"]
+    # Both checkpoints are scored; export takes the last, fixed by iteration, unless asked to rank.
+    scores = {row["iteration"]: (row["start_zero_s"], row["completion"]) for row in read_training_log(folder)}
+    assert metrics["best_checkpoint"] == max(scores, key=lambda it: (*scores[it], it))
+    assert json.loads((exported / "manifest.json").read_text())["metrics"]["checkpoint_iteration"] == 2
+    # export.best_by=completion orders the same scores completion first
+    args = ("run", "--robot", robot, "--motion", motion, "--until", "export", "--profile", "smoke")
+    by_completion = cli(*args, "--set", "export.best_by=completion")
+    assert by_completion.returncode == 0, by_completion.stderr
+    (other,) = [p for p in (artifacts / "export" / robot / motion).iterdir() if p != exported]
+    completion_first = max(scores, key=lambda it: (scores[it][1], scores[it][0], it))
+    assert json.loads((other / "manifest.json").read_text())["metrics"]["checkpoint_iteration"] == completion_first
+    residual = [joint for joint, kind in zip(action["outputs"], action["semantics"]) if kind == "residual"]
+    assert sorted(residual) == sorted(
+        f"{side}_{joint}_joint" for side in ("left", "right") for joint in ("hip_pitch", "knee")
+    )
+    assert action["semantics"].count("absolute") == len(action["outputs"]) - 4

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import RETARGETED_DIR, ReferenceSeeds, cli, video_frames
+from conftest import RETARGETED_DIR, ReferenceSeeds, check_smoke_training_and_export, cli, video_frames
 from rerun.chunk import RrdReader
 from tensordict import TensorDict
 
@@ -149,7 +149,7 @@ def test_smoke_profile_trains_exports_and_validates(
     report = json.loads((validate / "report.json").read_text())
     for controller in ("policy", "zero_action"):
         grid = report["nominal"][controller]["fixed_grid"]
-        assert grid["rollouts"] == report["protocol"]["starts"] == {"g1": 27, "h1_2": 46}[robot]  # every 5 s
+        assert grid["rollouts"] == report["protocol"]["starts"] == {"g1": 14, "h1_2": 23}[robot]  # every 10 s
         assert 0.2 < grid["mean_survival_s"] < 10 and grid["E_g_mpbpe"] > 0
         assert len(report["nominal"][controller]["drift"]) == 6
         # Per start: the fixed grid's starts in order, their mean the grid's, the first start-zero's.
@@ -226,3 +226,4 @@ def test_smoke_profile_trains_exports_and_validates(
         assert rows["/human/joints"] == 3945
         # Its tracking errors plotted, one value per step it survived.
         assert rows["/tracking/body_error_m"] == rows["/tracking/joint_error_rad"] == steps
+    check_smoke_training_and_export(artifacts, robot, motion)

@@ -12,9 +12,10 @@ from conftest import PROJECT, cli
 from rd_pipeline.api.sweeps import SHARED_UNTIL, Trial, run_sweep, shared_upstream_args, validation_report
 
 FAST = ("train.iterations=1", "train.clip=0:4")
-"""One PPO iteration on 4 s of motion: one validation start per trial (the smoke grid is 5 s)."""
+"""One PPO iteration on 4 s of motion: one validation start per trial (the smoke grid is 10 s)."""
 
 
+@pytest.mark.usefixtures("g1_dance_store")
 @pytest.mark.slow
 def test_ray_sweep_reports_a_failing_trial_and_finishes_the_others(artifacts: Path) -> None:
     pytest.importorskip("ray", reason="the ray extra is not installed (CI installs it)")

@@ -115,6 +115,7 @@ class _Painter:
         # The robots' MJCFs bring no lights: a brighter headlight shows their shapes.
         model.vis.headlight.ambient[:] = 0.45
         model.vis.headlight.diffuse[:] = 0.6
+        model.vis.quality.offsamples = look.multisamples
         self.tracked = mujoco.MjData(model)
         self.reference = mujoco.MjData(model)
         self.renderer = mujoco.Renderer(model, look.height, look.width)
