@@ -90,6 +90,8 @@ ARMS: dict[str, tuple[str, ...]] = {
     "lr_3e-4": ("train.ppo.learning_rate=0.0003",),
     "entropy_0": ("train.ppo.entropy_coef=0.0",),
     "net_256": ("train.ppo.hidden_dims=256,128,64",),
+    # The second learner: off-policy TD3 (FastTD3's recipe at CPU batch sizes), same environment.
+    "td3": ("train.algorithm=td3",),
 }
 """Arm -> its `--set` overrides on the `cpu` profile (each lever of the recipe, one at a time)."""
 

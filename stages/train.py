@@ -1,4 +1,5 @@
-"""`train`: reference + balanced prior -> residual-action PPO policy (checkpoints, log, learning curve)."""
+"""`train`: reference + balanced prior -> residual-action policy, by PPO or TD3 (checkpoints, log,
+learning curve)."""
 
 from __future__ import annotations
 
@@ -79,7 +80,7 @@ def _train(ctx: StageContext, job: TrainingJob) -> TrainingOutcome:
     from rd_pipeline.training.runner import run_job
 
     first = checkpoint_iteration(job.checkpoint) if job.checkpoint else 0
-    with ctx.progress(job.config.iterations, f"PPO {ctx.robot}", done=first) as advance:
+    with ctx.progress(job.config.iterations, f"{job.config.algorithm.upper()} {ctx.robot}", done=first) as advance:
         status = lambda row: advance(f"reward {row['reward']:.2f}  episode {row['episode_length_s'] or 0:.2f} s")
         if job.config.ranks > 1:
             return train_in_processes(job, status)
@@ -136,7 +137,7 @@ def _kept_progress(work: Path) -> tuple[bool, str]:
 STAGE = Stage(
     name="train",
     version=7,
-    description="reference + prior -> residual-action PPO policy (multi-head critic, segment sampler)",
+    description="reference + prior -> residual-action policy (multi-head PPO or TD3, segment sampler)",
     params=TrainConfig,
     provides="policy",
     run=_run,

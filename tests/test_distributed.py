@@ -75,7 +75,7 @@ def test_a_checkpoint_continues_only_with_the_ranks_that_made_it(tmp_path: Path)
     checkpoint = checkpoint_path(tmp_path / "one", 1)
     runner = TrainingRunner(h1_2_dance_job(single, tmp_path / "one"))
     with pytest.raises(PipelineError) as error:
-        load_checkpoint(checkpoint, runner.ppo, runner.env, Ranks(rank=1, world_size=2))
+        load_checkpoint(checkpoint, runner.learner, runner.env, Ranks(rank=1, world_size=2))
     runner.close()
     assert str(error.value) == (
         f"{checkpoint}: made by 1 training processes, resumed with 2; continue it with train.ranks=1"

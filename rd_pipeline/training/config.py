@@ -1,5 +1,5 @@
-"""What a training run is configured by: its budget, the clip, and the environment, PPO and
-sampler settings (profiles set these; they are the `train` stage's params)."""
+"""What a training run is configured by: its budget, the clip, the learner, and the environment,
+PPO or TD3 and sampler settings (profiles set these; they are the `train` stage's params)."""
 
 from __future__ import annotations
 
@@ -13,14 +13,21 @@ from rd_pipeline.motion import MIN_MOTION_S
 from rd_pipeline.params import ParamRangeError, require_positive
 from rd_pipeline.sampling.sampler import SamplerConfig
 from rd_pipeline.training.ppo_config import PpoConfig
+from rd_pipeline.training.td3_config import Td3Config
+
+ALGORITHMS = ("ppo", "td3")
 
 
 @dataclass(frozen=True)
 class TrainConfig:
     """Training budget and the environment, PPO and sampler settings (profiles set these)."""
 
+    algorithm: str = "ppo"
+    """The learner: `ppo` (the paper's, on-policy) or `td3` (off-policy, many updates per sample;
+    one process)."""
     iterations: int = 20_000
-    """PPO iterations (paper: 20K for final policies)."""
+    """Iterations (paper: 20K PPO iterations for final policies); an iteration collects
+    `steps_per_env` steps of every environment, then updates."""
     checkpoint_every: int = 500
     """Iterations between checkpoints."""
     seed: int = 0
@@ -41,18 +48,34 @@ class TrainConfig:
     env: EnvConfig = EnvConfig()
     """Environment."""
     ppo: PpoConfig = PpoConfig()
-    """PPO."""
+    """PPO (`algorithm=ppo`)."""
+    td3: Td3Config = Td3Config()
+    """TD3 (`algorithm=td3`)."""
     sampler: SamplerConfig = SamplerConfig()
     """Segment sampler."""
 
     def __post_init__(self) -> None:
         require_positive(self, "iterations", "checkpoint_every", "scoring_starts", "ranks")
         clip_seconds(self.clip)
+        if self.algorithm not in ALGORITHMS:
+            raise ParamRangeError("algorithm", f"must be one of {', '.join(ALGORITHMS)}, got '{self.algorithm}'")
+        if self.algorithm == "td3" and self.ranks > 1:
+            raise ParamRangeError("ranks", f"must be 1 with algorithm td3 (one process), got {self.ranks}")
+
+    @property
+    def steps_per_env(self) -> int:
+        """Steps of every environment one iteration collects."""
+        return self.td3.steps_per_env if self.algorithm == "td3" else self.ppo.steps_per_env
 
     @property
     def samples_per_iteration(self) -> int:
-        """PPO samples one iteration collects over every rank."""
-        return self.ranks * self.env.num_envs * self.ppo.steps_per_env
+        """Samples one iteration collects over every rank."""
+        return self.ranks * self.env.num_envs * self.steps_per_env
+
+    @property
+    def actor_hidden_dims(self) -> tuple[int, ...]:
+        """The actor's MLP widths (the exported policy's)."""
+        return self.td3.hidden_dims if self.algorithm == "td3" else self.ppo.hidden_dims
 
 
 def clip_seconds(clip: str) -> tuple[float, float | None]:

@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 import torch
 
-from rd_pipeline.env.mdp.rewards import GROUPS
 from rd_pipeline.env.tracking_env import TrackingEnv
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
@@ -27,6 +26,7 @@ from rd_pipeline.sampling.sampler import SegmentSampler
 from rd_pipeline.training.config import TrainConfig
 from rd_pipeline.training.distributed import ONE_PROCESS, Ranks
 from rd_pipeline.training.evaluate import checkpoint_scorer, scoring
+from rd_pipeline.training.learner import build_learner
 from rd_pipeline.training.log import (
     CHECKPOINT_DIR,
     LOG_FILE,
@@ -35,7 +35,6 @@ from rd_pipeline.training.log import (
     intact_checkpoints,
     seal_checkpoint,
 )
-from rd_pipeline.training.ppo import MultiHeadPPO, build_ppo
 from rd_pipeline.training.trainer import load_checkpoint, train
 
 CONTINUED_FILE = "continued_from.txt"
@@ -101,7 +100,7 @@ class TrainingOutcome:
 
 
 class TrainingRunner:
-    """One rank's training environment and PPO, and on rank 0 a nominal scoring environment.
+    """One rank's training environment and learner, and on rank 0 a nominal scoring environment.
 
     With several `ranks` (data-parallel PPO) each rank steps its own environments and sampler,
     seeded apart, from the same initial weights."""
@@ -119,15 +118,7 @@ class TrainingRunner:
         self.env = TrackingEnv(
             job.robot, job.reference, self.sampler, segments.starts, segments.lengths, config.env, seed
         )
-        self.ppo: MultiHeadPPO = build_ppo(
-            self.env.get_observations(),
-            self.env.num_envs,
-            self.env.num_actions,
-            len(GROUPS),
-            config.ppo,
-            config.env.device,
-            ranks,
-        )
+        self.learner = build_learner(self.env, config, ranks)
         if ranks.distributed:
             # The weights are rank 0's; the action noise, drawn from torch's generator, is each rank's own.
             torch.manual_seed(seed)
@@ -149,12 +140,12 @@ class TrainingRunner:
         job = self.job
         first = 0
         if job.checkpoint is not None:
-            first = load_checkpoint(job.checkpoint, self.ppo, self.env, self.ranks)
-        mean_action = lambda obs: self.ppo.actor(obs, stochastic_output=False)
+            first = load_checkpoint(job.checkpoint, self.learner, self.env, self.ranks)
+        mean_action = lambda obs: self.learner.actor(obs, stochastic_output=False)
         score = None if self.scoring_env is None else checkpoint_scorer(self.scoring_env, mean_action)
         train(
             self.env,
-            self.ppo,
+            self.learner,
             job.config.iterations,
             job.work,
             job.config.checkpoint_every,

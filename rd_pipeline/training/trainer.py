@@ -1,4 +1,5 @@
-"""The training loop: rollouts, multi-head PPO updates, checkpoints, resume, logs, learning curve."""
+"""The training loop: rollouts, the learner's updates (multi-head PPO or TD3), checkpoints, resume,
+logs, learning curve."""
 
 from __future__ import annotations
 
@@ -20,8 +21,8 @@ from rd_pipeline.env.tracking_env import TrackingEnv
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.files import write_bytes_whole
 from rd_pipeline.training.distributed import ONE_PROCESS, Ranks, gather_to_leader, summed, weights_digest
+from rd_pipeline.training.learner import Learner
 from rd_pipeline.training.log import LOG_FILE, checkpoint_path, logged_iteration, seal_checkpoint
-from rd_pipeline.training.ppo import MultiHeadPPO
 
 
 def rank_state(env: TrackingEnv) -> dict:
@@ -36,15 +37,15 @@ def rank_state(env: TrackingEnv) -> dict:
     }
 
 
-def save_checkpoint(folder: Path, iteration: int, ppo: MultiHeadPPO, rank_states: list[dict]) -> None:
+def save_checkpoint(folder: Path, iteration: int, learner: Learner, rank_states: list[dict]) -> None:
     """Save the checkpoint of `iteration` into the training `folder` whole (never torn) and seal
     it with its hash and the log's; a folder removed while training ran stops the run."""
     if not folder.is_dir():
         raise PipelineError(f"{folder} was removed while training ran; the run stops (its progress went with it)")
     state = {
         "iteration": iteration,
-        "algorithm": ppo.save(),
-        "learning_rate": ppo.learning_rate,
+        "algorithm": learner.save(),
+        "learning_rate": learner.learning_rate,
         "ranks": rank_states,
     }
     # Serialized in memory first: torch's file writer turns a full disk into a RuntimeError.
@@ -54,7 +55,7 @@ def save_checkpoint(folder: Path, iteration: int, ppo: MultiHeadPPO, rank_states
     seal_checkpoint(folder, iteration)
 
 
-def load_checkpoint(path: Path, ppo: MultiHeadPPO, env: TrackingEnv, ranks: Ranks = ONE_PROCESS) -> int:
+def load_checkpoint(path: Path, learner: Learner, env: TrackingEnv, ranks: Ranks = ONE_PROCESS) -> int:
     """Load the shared weights and this rank's state; returns the checkpoint's iteration."""
     state = torch.load(path, weights_only=False, map_location="cpu")
     saved = state["ranks"]
@@ -63,10 +64,10 @@ def load_checkpoint(path: Path, ppo: MultiHeadPPO, env: TrackingEnv, ranks: Rank
             f"{path}: made by {len(saved)} training processes, resumed with {ranks.world_size}; "
             f"continue it with train.ranks={len(saved)}"
         )
-    ppo.load(state["algorithm"], None, strict=True)
-    ppo.learning_rate = state["learning_rate"]
-    for group in ppo.optimizer.param_groups:
-        group["lr"] = ppo.learning_rate
+    learner.load(state["algorithm"], None, strict=True)
+    learner.learning_rate = state["learning_rate"]
+    for group in learner.optimizer.param_groups:
+        group["lr"] = learner.learning_rate
     mine = saved[ranks.rank]
     env.sampler.load_state_dict(mine["sampler"])
     env.load_state_dict(mine["env"])
@@ -90,7 +91,7 @@ class Rollout:
 
 def train(
     env: TrackingEnv,
-    ppo: MultiHeadPPO,
+    learner: Learner,
     iterations: int,
     out_dir: Path,
     checkpoint_every: int,
@@ -99,7 +100,7 @@ def train(
     score: Callable[[], dict[str, float]] | None = None,
     ranks: Ranks = ONE_PROCESS,
 ) -> list[dict]:
-    """Run PPO from `start_iteration` to `iterations`, checkpointing every `checkpoint_every` and at the end.
+    """Train `learner` from `start_iteration` to `iterations`, checkpointing every `checkpoint_every` and at the end.
 
     `score`, if given, rates the policy at each checkpoint; its figures go into that iteration's log row.
     With several `ranks`, every rank steps its own environments, rank 0 scores and writes the log
@@ -110,9 +111,9 @@ def train(
     log = _open_log(out_dir, start_iteration) if ranks.leader else None
     for iteration in range(start_iteration, iterations):
         began = time.perf_counter()
-        obs, rollout = _collect(env, ppo, obs)
-        losses = ppo.update()
-        row = _log_row(env, ppo, iteration + 1, time.perf_counter() - began, rollout, losses, ranks)
+        obs, rollout = _collect(env, learner, obs)
+        losses = learner.update()
+        row = _log_row(env, learner, iteration + 1, time.perf_counter() - began, rollout, losses, ranks)
         done = iteration + 1
         checkpoint = done % checkpoint_every == 0 or done == iterations
         states = gather_to_leader(ranks, rank_state(env)) if checkpoint else []
@@ -125,7 +126,7 @@ def train(
         log.flush()
         on_iteration(row)
         if checkpoint:
-            save_checkpoint(out_dir, done, ppo, states)
+            save_checkpoint(out_dir, done, learner, states)
     if log is not None:
         log.close()
     return history
@@ -137,8 +138,8 @@ def _open_log(out_dir: Path, start_iteration: int) -> TextIO:
     return (out_dir / LOG_FILE).open("a")
 
 
-def _collect(env: TrackingEnv, ppo: MultiHeadPPO, obs: TensorDict) -> tuple[TensorDict, Rollout]:
-    """One rollout of every environment into PPO's storage, and the returns computed."""
+def _collect(env: TrackingEnv, learner: Learner, obs: TensorDict) -> tuple[TensorDict, Rollout]:
+    """One rollout of every environment into the learner, and the returns computed."""
     lengths: list[float] = []
     rewards = []
     nonfinite = 0
@@ -147,21 +148,21 @@ def _collect(env: TrackingEnv, ppo: MultiHeadPPO, obs: TensorDict) -> tuple[Tens
     # them between the policy's small matrix products. The update gets every core.
     torch.set_num_threads(1)
     with torch.inference_mode():
-        for _ in range(ppo.storage.num_transitions_per_env):
-            actions = ppo.act(obs)
+        for _ in range(learner.storage.num_transitions_per_env):
+            actions = learner.act(obs)
             obs, reward, dones, extras = env.step(actions)
-            ppo.process_env_step(obs, reward, dones, extras)
+            learner.process_env_step(obs, reward, dones, extras)
             lengths += extras["episode_length"].tolist()
             nonfinite += extras["nonfinite"]
             rewards.append(reward.mean(0))
-        ppo.compute_returns(obs)
+        learner.compute_returns(obs)
     torch.set_num_threads(cores)
     return obs, Rollout(lengths, torch.stack(rewards), nonfinite)
 
 
 def _log_row(
     env: TrackingEnv,
-    ppo: MultiHeadPPO,
+    learner: Learner,
     iteration: int,
     seconds: float,
     rollout: Rollout,
@@ -174,7 +175,7 @@ def _log_row(
     length_sum = totals[0]
     ended = totals[1]
     per_group = np.array(totals[3:]) / ranks.world_size
-    samples = ranks.world_size * env.num_envs * ppo.storage.num_transitions_per_env
+    samples = ranks.world_size * env.num_envs * learner.storage.num_transitions_per_env
     row = {
         "iteration": iteration,
         "seconds": round(seconds, 3),
@@ -183,7 +184,7 @@ def _log_row(
         "reward": round(float(per_group.sum()), 4),
         **{f"reward_{g}": round(float(v), 4) for g, v in zip(GROUPS, per_group)},
         **{f"loss_{k}": round(float(v), 4) for k, v in losses.items()},
-        "learning_rate": ppo.learning_rate,
+        "learning_rate": learner.learning_rate,
         "motion_far_m": round(env.curriculum.motion_far_m, 4),
         "penalty_scale": round(env.curriculum.penalty_scale, 4),
         "nonfinite_resets": int(totals[2]),
@@ -191,7 +192,7 @@ def _log_row(
         **{f"physics_{name}": value for name, value in env.backend.diagnostics().items()},
     }
     if ranks.distributed:
-        digests = gather_to_leader(ranks, weights_digest(ppo.actor) + weights_digest(ppo.critic))
+        digests = gather_to_leader(ranks, weights_digest(learner.actor) + weights_digest(learner.critic))
         row["rank_weights"] = digests
     return row
 
