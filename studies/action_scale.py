@@ -83,7 +83,7 @@ def _measure(args: argparse.Namespace) -> dict[str, Any]:
         raise ValueError(f"{train} holds no checkpoint {iteration}")
     runner = _runner(plan, args.starts)
     scaled = _scaled_joints(runner.job.robot.config.policy_joints, args.joints)
-    load_checkpoint(held[iteration], runner.ppo, runner.env)
+    load_checkpoint(held[iteration], runner.learner, runner.env)
     env = runner.scoring_env
     assert env is not None
     fresh = env.state_dict()
@@ -147,7 +147,7 @@ def _survival(
     """Seconds survived from each start with the policy's mean outputs on `scaled` joints times
     `scale`, plus the actor's noise seeded by `draw` (None: no noise)."""
     factor = torch.where(scaled, scale, 1.0)
-    actor = runner.ppo.actor
+    actor = runner.learner.actor
 
     def policy(obs):
         if draw is None:
@@ -166,7 +166,7 @@ def _survival(
 
 def _noise_std(runner: TrainingRunner) -> list[float]:
     """The actor's noise std per policy joint, in action units (what the draws added)."""
-    std = runner.ppo.actor.output_std
+    std = runner.learner.actor.output_std
     return [round(float(value), 3) for value in std[0]]
 
 
