@@ -35,6 +35,7 @@ from bench.retarget import resume_log, retarget_and_score, shared_takes
 from bench.retarget_ranges import widened_ranges, with_g1_leg_ranges
 from rd_pipeline import paths
 from rd_pipeline.artifacts.stage import typed_config
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.retarget.config import RetargetConfig
@@ -72,7 +73,7 @@ def main() -> None:
     parser.add_argument("--resume", action="store_true", help="keep the rows already in <out>.jsonl")
     parser.add_argument("--out", type=Path, default=Path("bench/results/retarget_variants"))
     args = parser.parse_args()
-    overrides = dict(item.split("=", 1) for item in args.set)
+    overrides = _overrides(args.set)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     log = args.out.with_suffix(".jsonl")
     rows = resume_log(log, args.resume)
@@ -93,6 +94,19 @@ def main() -> None:
                     file.write(json.dumps(row) + "\n")
                 print(f"{row['robot']:<8} {row['clip']:<36} {_verdict(row)}", flush=True)
     args.out.with_suffix(".md").write_text(_table(rows, overrides))
+
+
+def _overrides(items: list[str]) -> dict[str, str]:
+    """`--set` as retarget params, checked before any work: a bad one stops in one line."""
+    malformed = [item for item in items if "=" not in item]
+    if malformed:
+        raise SystemExit(f"--set {malformed[0]}: give name=value")
+    overrides = dict(item.split("=", 1) for item in items)
+    try:
+        typed_config(RetargetConfig, overrides, "retarget")
+    except (PipelineError, ValueError) as exc:
+        raise SystemExit(f"--set: {exc}") from None
+    return overrides
 
 
 def clips(take: str, variant: str) -> list[tuple[str, HumanMotion]]:

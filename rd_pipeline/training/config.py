@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Literal
 
 from rd_pipeline.env.config import EnvConfig
 from rd_pipeline.errors import PipelineError
@@ -15,14 +16,12 @@ from rd_pipeline.sampling.sampler import SamplerConfig
 from rd_pipeline.training.ppo_config import PpoConfig
 from rd_pipeline.training.td3_config import Td3Config
 
-ALGORITHMS = ("ppo", "td3")
-
 
 @dataclass(frozen=True)
 class TrainConfig:
     """Training budget and the environment, PPO and sampler settings (profiles set these)."""
 
-    algorithm: str = "ppo"
+    algorithm: Literal["ppo", "td3"] = "ppo"
     """The learner: `ppo` (the paper's, on-policy) or `td3` (off-policy, many updates per sample;
     one process)."""
     iterations: int = 20_000
@@ -57,8 +56,6 @@ class TrainConfig:
     def __post_init__(self) -> None:
         require_positive(self, "iterations", "checkpoint_every", "scoring_starts", "ranks")
         clip_seconds(self.clip)
-        if self.algorithm not in ALGORITHMS:
-            raise ParamRangeError("algorithm", f"must be one of {', '.join(ALGORITHMS)}, got '{self.algorithm}'")
         if self.algorithm == "td3" and self.ranks > 1:
             raise ParamRangeError("ranks", f"must be 1 with algorithm td3 (one process), got {self.ranks}")
 
