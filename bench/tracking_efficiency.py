@@ -312,6 +312,7 @@ def _curves(rows: list[dict[str, Any]], window: Window, path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker
 
     panels = (
         ("nominal_mean_s", "nominal_zero_action_mean_s", "fixed-grid mean, nominal (s)"),
@@ -320,18 +321,23 @@ def _curves(rows: list[dict[str, Any]], window: Window, path: Path) -> None:
         ("randomized_start_zero_s", None, "start-zero, randomized (s)"),
     )
     figure, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6))
+    millions = [row["samples"] / 1e6 for row in rows] or [1.0]
     for axis, (field, zero, title) in zip(axes, panels):
         for arm, rungs in _by_arm(rows).items():
             budgets = sorted(rungs)
-            samples = [_mean(rungs[b], "samples") for b in budgets]
+            samples = [_mean(rungs[b], "samples") / 1e6 for b in budgets]
             line = axis.plot(samples, [_mean(rungs[b], field) for b in budgets], marker="o", label=arm)[0]
             for budget in budgets:
                 dots = [row[field] for row in rungs[budget]]
-                axis.scatter([_mean(rungs[budget], "samples")] * len(dots), dots, color=line.get_color(), s=8)
+                axis.scatter([_mean(rungs[budget], "samples") / 1e6] * len(dots), dots, color=line.get_color(), s=8)
         if zero is not None and rows:
             axis.axhline(_mean(rows, zero), color="grey", linestyle="--", label="zero action")
         axis.set_xscale("log")
-        axis.set_xlabel("samples")
+        # Budgets a rung apart differ by a factor of 2; one rung alone still gets a readable axis.
+        axis.set_xlim(min(millions) / 1.5, max(millions) * 1.5)
+        axis.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+        axis.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        axis.set_xlabel("M samples")
         axis.set_title(title, fontsize=10)
     axes[0].legend(fontsize=8)
     figure.suptitle(f"{window.robot} {window.motion} {window.clip} s ({window.source}): survival against samples")
