@@ -74,6 +74,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("bench/results/retarget_variants"))
     args = parser.parse_args()
     overrides = _overrides(args.set)
+    params = _checked_params(overrides)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     log = args.out.with_suffix(".jsonl")
     rows = resume_log(log, args.resume)
@@ -86,7 +87,7 @@ def main() -> None:
         if (robot, take, variant) not in done
     ]
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        futures = [pool.submit(_rows, *job, overrides) for job in todo]
+        futures = [pool.submit(_rows, *job, params) for job in todo]
         for future in as_completed(futures):
             for row in future.result():
                 rows.append(row)
@@ -97,16 +98,19 @@ def main() -> None:
 
 
 def _overrides(items: list[str]) -> dict[str, str]:
-    """`--set` as retarget params, checked before any work: a bad one stops in one line."""
+    """`--set name=value` items by name; a malformed one stops in one line."""
     malformed = [item for item in items if "=" not in item]
     if malformed:
         raise SystemExit(f"--set {malformed[0]}: give name=value")
-    overrides = dict(item.split("=", 1) for item in items)
+    return dict(item.split("=", 1) for item in items)
+
+
+def _checked_params(overrides: dict[str, str]) -> RetargetConfig:
+    """The retarget params `--set` makes, checked once before any work: a bad one stops in one line."""
     try:
-        typed_config(RetargetConfig, overrides, "retarget")
+        return typed_config(RetargetConfig, overrides, "retarget")
     except (PipelineError, ValueError) as exc:
         raise SystemExit(f"--set: {exc}") from None
-    return overrides
 
 
 def clips(take: str, variant: str) -> list[tuple[str, HumanMotion]]:
@@ -123,9 +127,8 @@ def clips(take: str, variant: str) -> list[tuple[str, HumanMotion]]:
     return [(f"{take} {start:.0f}-{start + FLOOR_CUT['length_s']:.0f} s", clip) for start, clip in cuts]
 
 
-def _rows(robot_name: str, take: str, variant: str, overrides: dict[str, str]) -> list[dict]:
+def _rows(robot_name: str, take: str, variant: str, params: RetargetConfig) -> list[dict]:
     robot = load_robot(robot_name)
-    params = typed_config(RetargetConfig, overrides, "retarget")
     rows = []
     for name, clip in clips(take, variant):
         _, quality, seconds = retarget_and_score(clip, robot, params)

@@ -53,7 +53,7 @@ def export_policy(trained: TrainedPolicy, robot: Robot, iteration: int, rule: st
         raise PipelineError(f"{trained.folder}: the training artifact has no checkpoints")
     if iteration not in checkpoints:
         raise PipelineError(f"export.checkpoint {iteration}: no such checkpoint (have {sorted(checkpoints)})")
-    hidden = list(trained.config.actor_hidden_dims)
+    hidden = list(trained.config.learner.hidden_dims)
     actor = load_actor(checkpoints[iteration], trained.observation_size, trained.num_actions, hidden)
     scripted = script_actor(actor)
     # Through memory: torch's file writer turns a full disk into a RuntimeError.

@@ -60,19 +60,15 @@ class TrainConfig:
             raise ParamRangeError("ranks", f"must be 1 with algorithm td3 (one process), got {self.ranks}")
 
     @property
-    def steps_per_env(self) -> int:
-        """Steps of every environment one iteration collects."""
-        return self.td3.steps_per_env if self.algorithm == "td3" else self.ppo.steps_per_env
+    def learner(self) -> PpoConfig | Td3Config:
+        """The settings of the learner `algorithm` names (its `steps_per_env` and actor
+        `hidden_dims` are what the loop and the exporter read)."""
+        return self.td3 if self.algorithm == "td3" else self.ppo
 
     @property
     def samples_per_iteration(self) -> int:
         """Samples one iteration collects over every rank."""
-        return self.ranks * self.env.num_envs * self.steps_per_env
-
-    @property
-    def actor_hidden_dims(self) -> tuple[int, ...]:
-        """The actor's MLP widths (the exported policy's)."""
-        return self.td3.hidden_dims if self.algorithm == "td3" else self.ppo.hidden_dims
+        return self.ranks * self.env.num_envs * self.learner.steps_per_env
 
 
 def clip_seconds(clip: str) -> tuple[float, float | None]:
