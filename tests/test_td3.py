@@ -4,14 +4,17 @@ validates through the same command as PPO."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 import torch
-from conftest import cli, h1_2_dance_env
+from conftest import cli, h1_2_dance_env, h1_2_dance_job
 
 from rd_pipeline.env.config import EnvConfig
-from rd_pipeline.training.log import checkpoints_by_iteration, read_training_log
+from rd_pipeline.training.config import TrainConfig
+from rd_pipeline.training.launch import train_in_processes
+from rd_pipeline.training.log import checkpoint_path, checkpoints_by_iteration, read_training_log
 from rd_pipeline.training.td3 import Td3
 from rd_pipeline.training.td3_config import Td3Config
 
@@ -75,11 +78,39 @@ def test_td3_trains_resumes_exports_and_validates_through_the_run_command(artifa
     assert report["nominal"]["policy"]["fixed_grid"]["rollouts"] == 23
 
 
+@pytest.mark.slow  # two processes train an H1-2 window, then continue: about 30 s
+def test_two_ranks_keep_one_set_of_weights_while_each_explores_its_own_environments(tmp_path: Path) -> None:
+    config = TrainConfig(
+        algorithm="td3",
+        iterations=3,
+        checkpoint_every=1,
+        scoring_starts=2,
+        ranks=2,
+        env=EnvConfig(num_envs=4, threads=1),
+        td3=SMALL,
+    )
+    rows: list[dict] = []
+    train_in_processes(h1_2_dance_job(config, tmp_path), rows.append)
+    # Learning starts in the second iteration; from then on every update changes the weights,
+    # and both ranks hold the same ones after it.
+    digests = [row["rank_weights"] for row in rows]
+    assert all(len(pair) == 2 and pair[0] == pair[1] for pair in digests)
+    assert len({pair[0] for pair in digests[1:]}) == 2
+    assert all(row["loss_critic"] > 0 for row in rows[1:])
+    saved = torch.load(checkpoint_path(tmp_path, 3), weights_only=False)
+    first, second = saved["ranks"]
+    assert first["env"]["rng"] != second["env"]["rng"]
+    # Grown by two iterations from its last checkpoint, on both ranks.
+    grown = replace(config, iterations=5)
+    train_in_processes(h1_2_dance_job(grown, tmp_path, checkpoint_path(tmp_path, 3)), rows.append)
+    assert [row["iteration"] for row in read_training_log(tmp_path)] == [1, 2, 3, 4, 5]
+    assert all(pair[0] == pair[1] for pair in (row["rank_weights"] for row in rows))
+
+
 @pytest.mark.parametrize(
     ("sets", "message"),
     [
         (("train.algorithm=sac",), "parameter 'train.algorithm' must be one of ppo, td3, got 'sac'"),
-        (("train.algorithm=td3", "train.ranks=2"), "parameter 'train.ranks' must be 1 with algorithm td3"),
         (("train.algorithm=td3", "train.td3.noise_std_min=0.5"), "must be at most noise_std_max (0.2), got 0.5"),
     ],
 )

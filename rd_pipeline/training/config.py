@@ -56,8 +56,6 @@ class TrainConfig:
     def __post_init__(self) -> None:
         require_positive(self, "iterations", "checkpoint_every", "scoring_starts", "ranks")
         clip_seconds(self.clip)
-        if self.algorithm == "td3" and self.ranks > 1:
-            raise ParamRangeError("ranks", f"must be 1 with algorithm td3 (one process), got {self.ranks}")
 
     @property
     def learner(self) -> PpoConfig | Td3Config:

@@ -45,7 +45,7 @@ def build_learner(env: TrackingEnv, config: TrainConfig, ranks: Ranks = ONE_PROC
         from rd_pipeline.training.td3 import Td3
 
         bound = config.env.actions.clip
-        return Td3(obs, env.num_envs, env.num_actions, bound, config.td3, config.seed, config.env.device)
+        return Td3(obs, env.num_envs, env.num_actions, bound, config.td3, config.seed, config.env.device, ranks)
     from rd_pipeline.training.ppo import build_ppo
 
     return build_ppo(obs, env.num_envs, env.num_actions, len(GROUPS), config.ppo, config.env.device, ranks)

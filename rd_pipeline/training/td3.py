@@ -7,6 +7,11 @@ answers the calls the training loop makes of PPO (`act`, `process_env_step`, `co
 `update`, `save`, `load`); a resumed run continues the weights, optimizers and normalizers, and
 refills its replay buffer (it is not saved: at a million transitions it would outweigh the
 checkpoints many times), so unlike PPO's a resumed TD3 run is not bit-for-bit the uninterrupted one.
+
+With several ranks each keeps its own environments, replay buffer and noise, and every update
+averages the gradients of each rank's batch (DDP's scheme: an update learns from `ranks x
+batch_size` transitions); the normalizers pool every rank's observations (rsl-rl's do once a
+process group exists), so the weights stay identical on every rank.
 """
 
 from __future__ import annotations
@@ -14,14 +19,22 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass
 
+import numpy as np
 import torch
+import torch.distributed as dist
 from rsl_rl.models import MLPModel
 from rsl_rl.modules import MLP, EmpiricalNormalization
+from rsl_rl.utils.utils import reduce_gradients_in_buckets
 from tensordict import TensorDict
 from torch import nn
 
+from rd_pipeline.training.distributed import ONE_PROCESS, Ranks
 from rd_pipeline.training.replay import NStepBatch, ReplayBuffer
 from rd_pipeline.training.td3_config import Td3Config
+
+GRADIENT_BUCKET_MB = 25.0
+"""rsl-rl PPO's bucket for averaging gradients over ranks: it bounds a packing buffer's size and
+leaves the averaged values unchanged, so it is no setting of the learner."""
 
 
 class TwinQ(nn.Module):
@@ -57,9 +70,12 @@ class Td3:
         config: Td3Config,
         seed: int,
         device: str = "cpu",
+        ranks: Ranks = ONE_PROCESS,
     ) -> None:
         self.config = config
         self.device = device
+        self.ranks = ranks
+        self.seed = ranks.seed(seed)
         self.num_envs = num_envs
         self.action_bound = action_bound
         self.actor = MLPModel(
@@ -74,6 +90,9 @@ class Td3:
         ).to(device)
         critic_dim = obs["critic"].shape[1]
         self.critic = TwinQ(critic_dim, num_actions, config.critic_hidden_dims).to(device)
+        if ranks.distributed:
+            _broadcast(self.actor)
+            _broadcast(self.critic)
         self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
         self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=config.learning_rate)
@@ -83,7 +102,7 @@ class Td3:
         self.buffer = ReplayBuffer(
             num_envs, config.buffer_size, obs["policy"].shape[1], critic_dim, num_actions, device
         )
-        self.generator = torch.Generator(device).manual_seed(seed)
+        self.generator = torch.Generator(device).manual_seed(self.seed)
         self.noise_std = self._draw_noise_std(num_envs)
         self.updates = 0
         self._pending: tuple[TensorDict, torch.Tensor] | None = None
@@ -148,6 +167,7 @@ class Td3:
         loss = (batch.weight * ((q1 - target) ** 2 + (q2 - target) ** 2)).sum() / batch.weight.sum().clamp(min=1)
         self.optimizer.zero_grad()
         loss.backward()
+        self._average_gradients(self.critic)
         nn.utils.clip_grad_norm_(self.critic.parameters(), config.max_grad_norm)
         self.optimizer.step()
         return float(loss.detach())
@@ -173,9 +193,14 @@ class Td3:
         loss = -q1.mean()
         self.actor_optimizer.zero_grad()
         loss.backward()
+        self._average_gradients(self.actor)
         nn.utils.clip_grad_norm_(self.actor.parameters(), self.config.max_grad_norm)
         self.actor_optimizer.step()
         return float(loss.detach())
+
+    def _average_gradients(self, module: nn.Module) -> None:
+        if self.ranks.distributed:
+            reduce_gradients_in_buckets(module.parameters(), self.ranks.world_size, GRADIENT_BUCKET_MB)
 
     def _soft_update(self) -> None:
         tau = self.config.tau
@@ -207,6 +232,18 @@ class Td3:
         self.critic_target.load_state_dict(state["critic_target_state_dict"], strict=strict)
         self.actor_optimizer.load_state_dict(state["actor_optimizer_state_dict"])
         self.optimizer.load_state_dict(state["critic_optimizer_state_dict"])
-        self.generator.set_state(state["generator"])
-        self.noise_std = state["noise_std"]
         self.updates = int(state["updates"])
+        if self.ranks.leader:
+            self.generator.set_state(state["generator"])
+            self.noise_std = state["noise_std"]
+            return
+        # A checkpoint holds rank 0's generator: the other ranks continue on streams of their own.
+        stream = np.random.SeedSequence([self.seed, self.updates]).generate_state(1)[0]
+        self.generator.manual_seed(int(stream))
+        self.noise_std = self._draw_noise_std(self.num_envs)
+
+
+def _broadcast(module: nn.Module) -> None:
+    """Rank 0's parameters and buffers (the normalizers' statistics) on every rank."""
+    for tensor in module.state_dict().values():
+        dist.broadcast(tensor, src=0)
