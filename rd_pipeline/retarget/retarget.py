@@ -74,7 +74,7 @@ def retarget(
         qpos = blend_configurations(smoothed, qpos, keep_ik)
         refined = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames, "feet on the smoothed motion"))
         if settings.pelvis_slack_m > 0:
-            refined = _pelvis_slack(ik, qpos, refined)
+            refined = _pelvis_slack(ik, qpos, refined, hulls)
         qpos = refined
     if rate != fps:
         targets = build_targets(human, robot, fps, feet.vertices, params.contact, params.shape, params.body_contact)
@@ -94,7 +94,7 @@ def retarget(
     )
 
 
-def _pelvis_slack(ik: RetargetIk, smoothed: np.ndarray, refined: np.ndarray) -> np.ndarray:
+def _pelvis_slack(ik: RetargetIk, smoothed: np.ndarray, refined: np.ndarray, hulls: BodyHulls) -> np.ndarray:
     """`refined` with the pelvis moved, smoothly, around the frames where the legs alone left a
     planted foot off its target (a knee or hip at its range limit), and the feet refined again there."""
     settings = ik.settings
@@ -108,8 +108,19 @@ def _pelvis_slack(ik: RetargetIk, smoothed: np.ndarray, refined: np.ndarray) -> 
     shift = gaussian_filter1d(reached[:, :3] - smoothed[:, :3], sigma, axis=0, mode="nearest")
     moved = smoothed.copy()
     moved[:, :3] += shift
-    changed = np.flatnonzero(np.any(shift != 0.0, axis=1))
+    # The pelvis moves here without the leg changes that let it: lying down, a lowered pelvis
+    # takes a knee or the trunk into the floor, which the legs-only refinement could escape only
+    # by a leg's jump in one frame. Those frames are raised back above the floor first.
+    moved[:, 2] += smooth_cover(_below_clearance(ik, moved, hulls), ik.targets.fps, settings.pelvis_slack_smoothing_s)
+    changed = np.flatnonzero(np.any(moved[:, :3] != smoothed[:, :3], axis=1))
     return ik.refine_feet(moved, changed, start=refined)
+
+
+def _below_clearance(ik: RetargetIk, qpos: np.ndarray, hulls: BodyHulls) -> np.ndarray:
+    """(T,) how far the deepest body of each row reaches below the IK's floor clearance."""
+    reference = _reference(ik.robot, qpos, ik.targets)
+    lowered = reference.body_pos_w - np.array([0.0, 0.0, ik.settings.floor_clearance_m])
+    return hulls.sink_depth(lowered, reference.body_quat_w, reference.body_names)
 
 
 def _resampled(robot: Robot, qpos: np.ndarray, rate: float, times: np.ndarray, depth_m: float) -> np.ndarray:
