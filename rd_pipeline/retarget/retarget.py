@@ -110,17 +110,29 @@ def _pelvis_slack(ik: RetargetIk, smoothed: np.ndarray, refined: np.ndarray, hul
     moved[:, :3] += shift
     # The pelvis moves here without the leg changes that let it: lying down, a lowered pelvis
     # takes a knee or the trunk into the floor, which the legs-only refinement could escape only
-    # by a leg's jump in one frame. Those frames are raised back above the floor first.
-    moved[:, 2] += smooth_cover(_below_clearance(ik, moved, hulls), ik.targets.fps, settings.pelvis_slack_smoothing_s)
+    # by a leg's jump in one frame. What the lowering sank, other than the feet the refinement
+    # puts back on their targets, is raised back first.
+    lowered = np.flatnonzero(shift[:, 2] < 0.0)
+    bodies = hulls.without(ik.robot.config.foot_bodies)
+    sunk = np.zeros(len(moved))
+    sunk[lowered] = np.maximum(_sink(ik, moved, lowered, bodies) - _sink(ik, smoothed, lowered, bodies), 0.0)
+    moved[:, 2] += smooth_cover(sunk, ik.targets.fps, settings.pelvis_slack_smoothing_s)
     changed = np.flatnonzero(np.any(moved[:, :3] != smoothed[:, :3], axis=1))
     return ik.refine_feet(moved, changed, start=refined)
 
 
-def _below_clearance(ik: RetargetIk, qpos: np.ndarray, hulls: BodyHulls) -> np.ndarray:
-    """(T,) how far the deepest body of each row reaches below the IK's floor clearance."""
-    reference = _reference(ik.robot, qpos, ik.targets)
-    lowered = reference.body_pos_w - np.array([0.0, 0.0, ik.settings.floor_clearance_m])
-    return hulls.sink_depth(lowered, reference.body_quat_w, reference.body_names)
+def _sink(ik: RetargetIk, qpos: np.ndarray, rows: np.ndarray, hulls: BodyHulls) -> np.ndarray:
+    """How far the deepest body reaches below the floor in each of `rows` of `qpos`."""
+    robot = ik.robot
+    reference = reference_from_joint_trajectory(
+        robot,
+        ik.targets.fps,
+        qpos[rows, :3],
+        qpos[rows, 3:7],
+        qpos[rows][:, robot.qpos_indices],
+        ik.targets.foot_contact[rows],
+    )
+    return hulls.sink_depth(reference.body_pos_w, reference.body_quat_w, reference.body_names)
 
 
 def _resampled(robot: Robot, qpos: np.ndarray, rate: float, times: np.ndarray, depth_m: float) -> np.ndarray:

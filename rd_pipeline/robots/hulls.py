@@ -57,6 +57,16 @@ class BodyHulls:
             radii.append(np.concatenate([r for _, r in support]))
         return cls(tuple(names), np.array(ids), tuple(points), tuple(radii))
 
+    def without(self, bodies: tuple[str, ...]) -> BodyHulls:
+        """The hulls of every body but `bodies`."""
+        keep = [k for k, name in enumerate(self.body_names) if name not in bodies]
+        return BodyHulls(
+            tuple(self.body_names[k] for k in keep),
+            self.body_ids[keep],
+            tuple(self.points[k] for k in keep),
+            tuple(self.radii[k] for k in keep),
+        )
+
     @cached_property
     def reach(self) -> np.ndarray:
         """(N,) how far each body's geometry reaches from its origin, radius included: a body whose
