@@ -335,7 +335,8 @@ def _curves(rows: list[dict[str, Any]], window: Window, path: Path) -> None:
         axis.set_xscale("log")
         # Budgets a rung apart differ by a factor of 2; one rung alone still gets a readable axis.
         axis.set_xlim(min(millions) / 1.5, max(millions) * 1.5)
-        axis.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+        budgets = sorted({row["rung_m"] for row in rows})
+        axis.set_xticks(budgets, [f"{budget:g}" for budget in budgets])
         axis.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         axis.set_xlabel("M samples")
         axis.set_title(title, fontsize=10)
