@@ -74,7 +74,7 @@ def retarget(
         qpos = blend_configurations(smoothed, qpos, keep_ik)
         refined = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames, "feet on the smoothed motion"))
         if settings.pelvis_slack_m > 0:
-            refined = _pelvis_slack(ik, qpos, refined, hulls)
+            refined = _pelvis_slack(ik, qpos, refined)
         qpos = refined
     if rate != fps:
         targets = build_targets(human, robot, fps, feet.vertices, params.contact, params.shape, params.body_contact)
@@ -94,7 +94,7 @@ def retarget(
     )
 
 
-def _pelvis_slack(ik: RetargetIk, smoothed: np.ndarray, refined: np.ndarray, hulls: BodyHulls) -> np.ndarray:
+def _pelvis_slack(ik: RetargetIk, smoothed: np.ndarray, refined: np.ndarray) -> np.ndarray:
     """`refined` with the pelvis moved, smoothly, around the frames where the legs alone left a
     planted foot off its target (a knee or hip at its range limit), and the feet refined again there."""
     settings = ik.settings
@@ -113,7 +113,7 @@ def _pelvis_slack(ik: RetargetIk, smoothed: np.ndarray, refined: np.ndarray, hul
     # by a leg's jump in one frame. What the lowering sank, other than the feet the refinement
     # puts back on their targets, is raised back first.
     lowered = np.flatnonzero(shift[:, 2] < 0.0)
-    bodies = hulls.without(ik.robot.config.foot_bodies)
+    bodies = ik.floor.hulls.without(ik.robot.config.foot_bodies)
     sunk = np.zeros(len(moved))
     sunk[lowered] = np.maximum(_sink(ik, moved, lowered, bodies) - _sink(ik, smoothed, lowered, bodies), 0.0)
     moved[:, 2] += smooth_cover(sunk, ik.targets.fps, settings.pelvis_slack_smoothing_s)
