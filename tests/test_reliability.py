@@ -67,7 +67,7 @@ def test_two_runs_of_one_key_started_together_both_succeed(artifacts: Path) -> N
     assert stages[-1].split()[1] == "ran"  # the other run may have computed the upstream stages
     assert "iterations=4" in stages[-1]
     # The note counts the iterations that ran, not the profile's 2.
-    assert summary[-1].startswith("note: smoke is a plumbing check: 4 PPO iterations train no policy")
+    assert summary[-1].startswith("note: smoke is a plumbing check: 4 iterations train no policy")
 
 
 @pytest.mark.slow

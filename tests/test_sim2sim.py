@@ -19,7 +19,6 @@ from rd_pipeline.evaluation.metrics import per_second, tracked_pct
 from rd_pipeline.evaluation.protocol import Protocol, RandomizedProtocol, TrackingTolerance
 from rd_pipeline.evaluation.sim2sim import BodySets, Rollout, reference_states, run_rollouts
 from rd_pipeline.evaluation.validation import deploy_model
-from rd_pipeline.evaluation.validation_config import RenderConfig
 from rd_pipeline.export.exporter import build_policy_spec
 from rd_pipeline.motion.contact import ContactThresholds
 from rd_pipeline.motion.reference import ReferenceMotion
@@ -27,6 +26,7 @@ from rd_pipeline.motion.retargeted_csv import import_retargeted_csv
 from rd_pipeline.policy_spec import PolicySpec
 from rd_pipeline.robots import load_robot
 from rd_pipeline.viz.render import Scene, render_pictures
+from rd_pipeline.viz.render_config import RenderConfig
 
 BROKEN_AT = 20
 """The frame from which the broken references leave the robot behind (0.4 s in)."""

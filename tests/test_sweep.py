@@ -11,8 +11,9 @@ from conftest import PROJECT, cli
 
 from rd_pipeline.api.sweeps import SHARED_UNTIL, Trial, run_sweep, shared_upstream_args, validation_report
 
-FAST = ("train.iterations=1", "train.clip=0:4")
-"""One PPO iteration on 4 s of motion: one validation start per trial (the smoke grid is 10 s)."""
+FAST = ("train.iterations=1", "train.clip=0:4", "validate.render.enabled=false")
+"""One PPO iteration on 4 s of motion: one validation start per trial (the smoke grid is 10 s),
+no pictures (test_export looks at them)."""
 
 
 @pytest.mark.usefixtures("g1_dance_store")

@@ -51,7 +51,12 @@ def test_updates_move_the_critic_toward_its_targets_and_actions_stay_in_the_boun
 @pytest.mark.slow  # trains on two ranks, grows, exports and validates: an end-to-end run
 def test_td3_trains_resumes_exports_and_validates_through_the_run_command(artifacts: Path) -> None:
     take = ("--robot", "h1_2", "--motion", "dance2_subject4", "--profile", "smoke", "--nproc", "2")
-    sets = ("train.algorithm=td3", "train.td3.learning_starts=4", "train.td3.batch_size=64")
+    sets = (
+        "train.algorithm=td3",
+        "train.td3.learning_starts=4",
+        "train.td3.batch_size=64",
+        "validate.render.enabled=false",
+    )
     short = cli("run", *take, "--until", "train", "--set", *sets, "train.iterations=3")
     assert short.returncode == 0, short.stderr
     assert "TD3 h1_2: 3/3" in short.stderr

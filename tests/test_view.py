@@ -52,10 +52,11 @@ def _rows_per_entity(path: Path) -> dict[str, int]:
     return rows
 
 
+@pytest.mark.usefixtures("g1_dance_store")  # the session's retargeted take
 @pytest.mark.slow
 def test_view_human_and_retargeted_robot(artifacts: Path, tmp_path: Path) -> None:
     out = tmp_path / "dance.rrd"
-    result = cli("view", "--robot", "g1", "--motion", "dance1_subject1", "--out", str(out))
+    result = cli("view", "--robot", "g1", "--motion", "dance1_subject2", "--out", str(out))
     assert result.returncode == 0, result.stderr
     rows = _rows_per_entity(out)
     assert rows.pop("/human/joints") == 3945 and rows.pop("/human/bones") == 3945

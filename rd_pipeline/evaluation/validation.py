@@ -22,7 +22,7 @@ from rd_pipeline.evaluation.metrics import drift, per_second, summarize, t_inter
 from rd_pipeline.evaluation.protocol import Protocol
 from rd_pipeline.evaluation.report import CONTROLLERS
 from rd_pipeline.evaluation.sim2sim import BodySets, Rollout, reference_states, run_rollouts
-from rd_pipeline.evaluation.validation_config import RenderConfig, ValidationConfig
+from rd_pipeline.evaluation.validation_config import ValidationConfig
 from rd_pipeline.evaluation.validation_report import ValidationReport
 from rd_pipeline.motion.reference import REFERENCE_FILE, ReferenceMotion
 from rd_pipeline.policy_runtime import Policy, load_runtimes
@@ -30,6 +30,7 @@ from rd_pipeline.policy_spec import SPEC_FILE, PolicySpec, load_policy_spec
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.assets import asset_path
 from rd_pipeline.viz.render import Scene, render_pictures
+from rd_pipeline.viz.render_config import RenderConfig
 from rd_pipeline.viz.tracked import TrackedRollout
 
 

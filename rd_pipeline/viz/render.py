@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from rd_pipeline.evaluation.validation_config import RenderConfig
 from rd_pipeline.files import write_bytes_whole
+from rd_pipeline.viz.render_config import RenderConfig
 
 if TYPE_CHECKING:
     # Imported where it renders: this process's MuJoCo is not the one `MUJOCO_GL` chose.
@@ -145,6 +145,8 @@ class _Painter:
         self.camera.lookat[2] = 0.7
         self.renderer.update_scene(self.tracked, self.camera)
         scene = self.renderer.scene
+        scene.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.look.shadows
+        scene.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = self.look.shadows
         first = scene.ngeom
         mujoco.mjv_addGeoms(
             self.model, self.reference, self.option, self.perturb, mujoco.mjtCatBit.mjCAT_DYNAMIC, scene
