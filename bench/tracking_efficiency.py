@@ -16,7 +16,8 @@ by the validation figures this bench reports.
 
 Writes `bench/results/tracking_efficiency/<window>/`: `runs/<arm>_seed<k>_<M>M.json` (samples,
 hours, train's score, the validation's figures, the train and validate keys, the
-commit), `curves.png` and `table.md`.
+commit), `curves.png` and `table.md`; with `--pictures`, `pictures/` (the start-zero rollout of
+each arm and seed at the last rung beside its reference, filmstrip and video).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -33,6 +35,7 @@ from typing import Any
 
 from bench.common import head_commit, training_hours
 from rd_pipeline.api import windows, workspace
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.evaluation.validation_report import ValidationReport
 from rd_pipeline.training.log import read_training_log
 
@@ -112,7 +115,9 @@ def main() -> None:
     window = WINDOWS[args.window].resolved(args.profile)
     folder = RESULTS / (args.window if args.profile == "cpu" else f"{args.window}_{args.profile}")
     folder.mkdir(parents=True, exist_ok=True)
-    if not args.report:
+    if args.pictures:
+        _pictures(args, window, folder / "pictures")
+    elif not args.report:
         _study(args, window, folder)
     rows = _rows(folder)
     _table(rows, folder / "table.md", args.eta)
@@ -131,6 +136,9 @@ def _parser() -> argparse.ArgumentParser:
         "--profile", default="cpu", help="cpu (2-16 cores) or paper (a GPU: --jobs 1, rungs of 10s of M)"
     )
     parser.add_argument("--report", action="store_true", help="only redraw the table and the curves")
+    parser.add_argument(
+        "--pictures", action="store_true", help="filmstrips of the trained --arms and --seeds at the last of --rungs"
+    )
     return parser
 
 
@@ -190,6 +198,33 @@ def _run(window: Window, arm: str, seed: int, rung: float, args: argparse.Namesp
         raise SystemExit(f"{arm} seed {seed} at {rung:g} M: {done.stderr.strip().splitlines()[-1]}")
     plan = workspace.plan(window.robot, window.motion, args.profile, overrides=sets, seed=seed, source=window.source)
     return _row(plan, arm, seed, rung)
+
+
+def _pictures(args: argparse.Namespace, window: Window, folder: Path) -> None:
+    """Each arm and seed's checkpoint at the last rung validated again with pictures (a rung's
+    own validation renders none, so the bench's figures stay as they were): the filmstrip and the
+    video of its start-zero rollout beside the reference, into `folder`. Trains nothing."""
+    folder.mkdir(exist_ok=True)
+    rung = args.rungs[-1]
+    take = ("--robot", window.robot, "--motion", window.motion, "--source", window.source)
+    for arm in args.arms:
+        for seed in args.seeds:
+            sets = (*_sets(window, arm, rung, args), "validate.render.enabled=true")
+            plan = workspace.plan(
+                window.robot, window.motion, args.profile, overrides=sets, seed=seed, source=window.source
+            )
+            try:
+                workspace.required_artifact(plan, "train")
+            except PipelineError as error:
+                raise SystemExit(f"{arm} seed {seed} at {rung:g} M: {error}") from None
+            print(f"{arm} seed {seed}: pictures at {rung:g} M samples", flush=True)
+            command = [sys.executable, "-m", "rd_pipeline", "run", *take, "--profile", args.profile]
+            done = subprocess.run([*command, "--seed", str(seed), "--set", *sets], capture_output=True, text=True)
+            if done.returncode:
+                raise SystemExit(f"{arm} seed {seed} at {rung:g} M: {done.stderr.strip().splitlines()[-1]}")
+            validate = workspace.required_artifact(plan, "validate")
+            for name in ("filmstrip.png", "rollout.mp4"):
+                shutil.copy(validate / name, folder / f"{arm}_seed{seed}_{rung:g}M_{name}")
 
 
 def _row(plan: workspace.Plan, arm: str, seed: int, rung: float) -> dict[str, Any]:
