@@ -189,15 +189,25 @@ def _sets(window: Window, arm: str, rung: float, args: argparse.Namespace) -> tu
 def _run(window: Window, arm: str, seed: int, rung: float, args: argparse.Namespace) -> dict[str, Any]:
     """Train (growing the rung before), export and validate one arm and seed at one budget."""
     sets = _sets(window, arm, rung, args)
-    take = ("--robot", window.robot, "--motion", window.motion, "--source", window.source)
-    command = [sys.executable, "-m", "rd_pipeline", "run", *take, "--profile", args.profile, "--seed", str(seed)]
-    env = {**os.environ, "OMP_NUM_THREADS": str(max(1, (os.cpu_count() or 1) // args.jobs))}
     print(f"{arm} seed {seed}: {rung:g} M samples", flush=True)
-    done = subprocess.run([*command, "--resume", "--set", *sets], env=env, capture_output=True, text=True)
-    if done.returncode:
-        raise SystemExit(f"{arm} seed {seed} at {rung:g} M: {done.stderr.strip().splitlines()[-1]}")
+    _pipeline(window, seed, sets, args, f"{arm} seed {seed} at {rung:g} M", resume=True)
     plan = workspace.plan(window.robot, window.motion, args.profile, overrides=sets, seed=seed, source=window.source)
     return _row(plan, arm, seed, rung)
+
+
+def _pipeline(
+    window: Window, seed: int, sets: tuple[str, ...], args: argparse.Namespace, label: str, *, resume: bool
+) -> None:
+    """One `rd-pipeline run` of the window in a child process, its threads split by `--jobs`; a
+    failure ends the bench with the child's last line, prefixed by `label`."""
+    take = ("--robot", window.robot, "--motion", window.motion, "--source", window.source)
+    command = [sys.executable, "-m", "rd_pipeline", "run", *take, "--profile", args.profile, "--seed", str(seed)]
+    if resume:
+        command.append("--resume")
+    env = {**os.environ, "OMP_NUM_THREADS": str(max(1, (os.cpu_count() or 1) // args.jobs))}
+    done = subprocess.run([*command, "--set", *sets], env=env, capture_output=True, text=True)
+    if done.returncode:
+        raise SystemExit(f"{label}: {done.stderr.strip().splitlines()[-1]}")
 
 
 def _pictures(args: argparse.Namespace, window: Window, folder: Path) -> None:
@@ -206,9 +216,9 @@ def _pictures(args: argparse.Namespace, window: Window, folder: Path) -> None:
     video of its start-zero rollout beside the reference, into `folder`. Trains nothing."""
     folder.mkdir(exist_ok=True)
     rung = args.rungs[-1]
-    take = ("--robot", window.robot, "--motion", window.motion, "--source", window.source)
     for arm in args.arms:
         for seed in args.seeds:
+            label = f"{arm} seed {seed} at {rung:g} M"
             sets = (*_sets(window, arm, rung, args), "validate.render.enabled=true")
             plan = workspace.plan(
                 window.robot, window.motion, args.profile, overrides=sets, seed=seed, source=window.source
@@ -216,12 +226,9 @@ def _pictures(args: argparse.Namespace, window: Window, folder: Path) -> None:
             try:
                 workspace.required_artifact(plan, "train")
             except PipelineError as error:
-                raise SystemExit(f"{arm} seed {seed} at {rung:g} M: {error}") from None
+                raise SystemExit(f"{label}: {error}") from None
             print(f"{arm} seed {seed}: pictures at {rung:g} M samples", flush=True)
-            command = [sys.executable, "-m", "rd_pipeline", "run", *take, "--profile", args.profile]
-            done = subprocess.run([*command, "--seed", str(seed), "--set", *sets], capture_output=True, text=True)
-            if done.returncode:
-                raise SystemExit(f"{arm} seed {seed} at {rung:g} M: {done.stderr.strip().splitlines()[-1]}")
+            _pipeline(window, seed, sets, args, label, resume=False)
             validate = workspace.required_artifact(plan, "validate")
             for name in ("filmstrip.png", "rollout.mp4"):
                 shutil.copy(validate / name, folder / f"{arm}_seed{seed}_{rung:g}M_{name}")
