@@ -85,6 +85,8 @@ ARMS: dict[str, tuple[str, ...]] = {
     "action_scale_0.5": ("train.env.actions.scale=0.5",),
     # The anchors' lenient, height-only end-effector terminations while training.
     "height_terminations": ("train.env.terminations.motion_far_height_only=true",),
+    # Reference joints 0.1 and 0.5 s ahead in the actor's observation besides the next step's.
+    "future_frames": ("train.env.observations.ref_future_steps=5,25",),
     # The sampler: uniform segments; failure credited to every visited segment.
     "sampler_uniform": ("train.sampler.mode=uniform",),
     "failure_visited": ("train.sampler.failure_credit=visited",),

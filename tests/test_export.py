@@ -44,16 +44,26 @@ def _env(robot_name: str, motion: str, config: EnvConfig):
 
 
 @pytest.mark.parametrize(
-    ("robot_name", "motion", "mode"), [("g1", "dance1_subject2", "selective"), ("h1_2", "dance2_subject4", "all")]
+    ("robot_name", "motion", "mode", "future"),
+    [("g1", "dance1_subject2", "selective", ()), ("h1_2", "dance2_subject4", "all", (5, 25))],
 )
-def test_deploy_observations_equal_the_training_environment(robot_name: str, motion: str, mode: str) -> None:
+def test_deploy_observations_equal_the_training_environment(
+    robot_name: str, motion: str, mode: str, future: tuple[int, ...]
+) -> None:
     config = nominal(EnvConfig(), 4)
-    config = dataclasses.replace(config, actions=dataclasses.replace(config.actions, mode=mode))
+    config = dataclasses.replace(
+        config,
+        actions=dataclasses.replace(config.actions, mode=mode),
+        observations=dataclasses.replace(config.observations, ref_future_steps=future),
+    )
     robot, reference, env = _env(robot_name, motion, config)
     spec = build_policy_spec(robot, config, env.num_actions, "import", "k", (0, reference.n_frames))
+    terms = {term["name"]: term["size"] for term in spec.get("observation.terms")}
+    assert terms.get("ref_joint_pos_future", 0) == len(future) * len(spec.get("joints.policy"))
     model = env.backend.models[0]
     deploy = DeployController(spec, model, reference, env.num_envs)
-    starts = torch.tensor([0, 37, 150, 420])
+    # The last start looks 25 steps past the reference's end: both clamp to its last frame.
+    starts = torch.tensor([0, 37, 150, 585])
     env.reset(torch.arange(4), frames=starts)
     obs = env.get_observations()["policy"]
     state = env.backend.state
@@ -66,8 +76,8 @@ def test_deploy_observations_equal_the_training_environment(robot_name: str, mot
         actions = 0.5 * torch.randn(4, env.num_actions, generator=generator)
         ctrl = deploy.targets(actions.numpy())
         obs, _, dones, _ = env.step(actions)
+        alive &= ~dones.numpy()  # an ended environment's queue was reset with it
         assert np.allclose(ctrl[alive], env.target_queue[alive, 0].numpy(), rtol=0, atol=1e-6)  # same PD targets
-        alive &= ~dones.numpy()
         state = env.backend.state
         deployed = deploy.observe(state.qpos, state.qvel)
         gap = np.abs(deployed - obs["policy"].numpy())[alive]

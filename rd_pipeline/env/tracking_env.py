@@ -137,6 +137,7 @@ class TrackingEnv:
         self.actions = ResidualActions(config.actions, semantics, self.default_pos[p], lower[p], upper[p])
         self.num_actions = self.actions.size
         self.actor_terms = actor_terms(len(rc.policy_joints), self.num_actions, config.observations)
+        self.future_steps = config.observations.ref_future_steps
         self.term_context = TermContext(
             root=tracked.index(rc.root_body),
             feet=(tracked.index(rc.foot_bodies[0]), tracked.index(rc.foot_bodies[1])),
@@ -216,6 +217,7 @@ class TrackingEnv:
         """One actor frame from `st` (the current `_state()`, computed here when not given)."""
         st = self._state() if st is None else st
         next_frame = self.command.next_frame()
+        future = self.command.frames_ahead(self.future_steps)
         inputs = ActorInputs(
             joint_pos=st["joint_pos"],
             joint_vel=st["joint_vel"],
@@ -223,6 +225,7 @@ class TrackingEnv:
             base_ang_vel=st["base_ang_vel"],
             last_action=self.action_history[:, 0],
             ref_joint_pos_next=self.command.ref.joint_pos[next_frame][:, self.policy_idx],
+            ref_joint_pos_future=self.command.ref.joint_pos[future][..., self.policy_idx].flatten(1),
             default_pos=self.default_pos[self.policy_idx],
         )
         return actor_frame(self.actor_terms, inputs)

@@ -87,6 +87,7 @@ class DeployController:
         self.reference_joints = reference.joint_pos[:, [reference.joint_names.index(j) for j in policy]]
         self.terms = spec.get("observation.terms")
         self.history = spec.get("observation.history")
+        self.future_steps = np.asarray(spec.data["observation"].get("ref_future_steps", []), dtype=np.int64)
         self.rollouts = rollouts
         self.frame = np.zeros(rollouts, dtype=np.int64)
         self.last_action = np.zeros((rollouts, len(self.outputs)))
@@ -94,6 +95,11 @@ class DeployController:
 
     def _next_frame(self) -> np.ndarray:
         return np.minimum(self.frame + 1, len(self.reference_joints) - 1)
+
+    def _future(self) -> np.ndarray:
+        """(R, K * P) the reference joints `ref_future_steps` control steps ahead, nearest first."""
+        ahead = np.minimum(self.frame[:, None] + self.future_steps, len(self.reference_joints) - 1)
+        return self.reference_joints[ahead].reshape(self.rollouts, -1)
 
     def _frame(self, qpos: np.ndarray, qvel: np.ndarray) -> np.ndarray:
         values = {
@@ -103,6 +109,7 @@ class DeployController:
             "base_ang_vel": qvel[:, 3:6],
             "last_action": self.last_action,
             "ref_joint_pos_next": self.reference_joints[self._next_frame()],
+            "ref_joint_pos_future": self._future(),
         }
         if self.noise is not None:
             values = self.noise(values)

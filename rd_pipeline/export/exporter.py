@@ -99,7 +99,7 @@ def build_policy_spec(
             "mjcf": config.mjcf,
             "joints": _joints_block(robot, policy),
             "action": _action_block(env.actions, semantics, outputs),
-            "observation": layout_json(terms, int(env.history)),
+            "observation": layout_json(terms, int(env.history), env.observations.ref_future_steps),
             "rates": {
                 "control_hz": 1.0 / (env.physics_dt * env.decimation),
                 "physics_hz": 1.0 / env.physics_dt,

@@ -73,6 +73,11 @@ class MotionCommand:
         """(N,) the frame each environment reaches at the next control step."""
         return (self.frame + 1).clamp(max=self.n_frames - 1)
 
+    def frames_ahead(self, steps: tuple[int, ...]) -> torch.Tensor:
+        """(N, K) the frame each environment reaches each of `steps` control steps ahead."""
+        ahead = torch.as_tensor(steps, dtype=self.frame.dtype, device=self.frame.device)
+        return (self.frame[:, None] + ahead).clamp(max=self.n_frames - 1)
+
     def advance(self) -> None:
         self.frame = self.next_frame()
 

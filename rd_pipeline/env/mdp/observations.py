@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 
 from rd_pipeline.env.quat import projected_gravity, rotate_inverse
 from rd_pipeline.lazy import lazy_import
+from rd_pipeline.params import ParamRangeError
 
 if TYPE_CHECKING:
     import torch
@@ -48,6 +49,18 @@ class ObservationsConfig:
     """The previous policy output (before clipping and scaling)."""
     ref_joint_pos_next: float = 1.0
     """The reference's policy-joint positions at the next control step (rad)."""
+    ref_joint_pos_future: float = 1.0
+    """The reference's policy-joint positions `ref_future_steps` control steps ahead (rad)."""
+    ref_future_steps: tuple[int, ...] = ()
+    """Control steps ahead whose reference joint positions the actor sees besides the next one
+    (empty: the paper's actor, the next step only; at 50 Hz, 5 and 25 are 0.1 and 0.5 s), so it can
+    prepare for a fast move. Past the reference's end, its last frame."""
+
+    def __post_init__(self) -> None:
+        if any(step < 1 for step in self.ref_future_steps):
+            raise ParamRangeError(
+                "ref_future_steps", f"must be control steps of 1 or more, got {self.ref_future_steps}"
+            )
 
 
 @dataclass(frozen=True)
@@ -66,6 +79,8 @@ class ActorInputs:
     """(N, A) previous action."""
     ref_joint_pos_next: torch.Tensor
     """(N, P) reference joint positions at the next control step."""
+    ref_joint_pos_future: torch.Tensor
+    """(N, K * P) reference joint positions at each of the K `ref_future_steps`, nearest first."""
     default_pos: torch.Tensor
     """(P,) default pose."""
 
@@ -94,6 +109,10 @@ def ref_joint_pos_next(x: ActorInputs) -> torch.Tensor:
     return x.ref_joint_pos_next
 
 
+def ref_joint_pos_future(x: ActorInputs) -> torch.Tensor:
+    return x.ref_joint_pos_future
+
+
 ACTOR_TERMS: dict[str, Callable[[ActorInputs], torch.Tensor]] = {
     "joint_pos": joint_pos,
     "joint_vel": joint_vel,
@@ -101,14 +120,22 @@ ACTOR_TERMS: dict[str, Callable[[ActorInputs], torch.Tensor]] = {
     "base_ang_vel": base_ang_vel,
     "last_action": last_action,
     "ref_joint_pos_next": ref_joint_pos_next,
+    "ref_joint_pos_future": ref_joint_pos_future,
 }
 """Term name -> function, in the order of an actor frame."""
 
 
 def actor_terms(num_joints: int, num_actions: int, cfg: ObservationsConfig) -> tuple[ObservationTerm, ...]:
     """One actor frame's layout (oldest history frame first in the stacked vector)."""
-    sizes = {"projected_gravity": 3, "base_ang_vel": 3, "last_action": num_actions}
-    return tuple(ObservationTerm(name, sizes.get(name, num_joints), getattr(cfg, name)) for name in ACTOR_TERMS)
+    sizes = {
+        "projected_gravity": 3,
+        "base_ang_vel": 3,
+        "last_action": num_actions,
+        "ref_joint_pos_future": len(cfg.ref_future_steps) * num_joints,
+    }
+    terms = (ObservationTerm(name, sizes.get(name, num_joints), getattr(cfg, name)) for name in ACTOR_TERMS)
+    # A term of no values is left out, so the paper's layout (and its policy.json) stays as it was.
+    return tuple(term for term in terms if term.size)
 
 
 def actor_frame(terms: tuple[ObservationTerm, ...], inputs: ActorInputs) -> torch.Tensor:
@@ -154,13 +181,16 @@ def critic_observation(inputs: CriticInputs) -> torch.Tensor:
     return torch.cat([term(inputs) for term in CRITIC_TERMS.values()], dim=-1)
 
 
-def layout_json(terms: tuple[ObservationTerm, ...], history: int) -> dict:
-    """The `observation` block of `policy.json`."""
+def layout_json(terms: tuple[ObservationTerm, ...], history: int, future_steps: tuple[int, ...]) -> dict:
+    """The `observation` block of `policy.json` (`ref_future_steps` only where the actor sees any)."""
     frame = sum(t.size for t in terms)
-    return {
+    layout = {
         "history": history,
         "frame_size": frame,
         "size": frame * history,
         "order": "oldest_first",
         "terms": [asdict(t) for t in terms],
     }
+    if future_steps:
+        layout["ref_future_steps"] = list(future_steps)
+    return layout
