@@ -18,8 +18,9 @@ from scipy.spatial.transform import Rotation
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.retarget.config import LagRepair, RetargetConfig
-from rd_pipeline.retarget.quality import quality_series, summarize_quality
+from rd_pipeline.retarget.quality import FootMeshes, quality_series, summarize_quality
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
+from rd_pipeline.retarget.targets import build_targets
 from rd_pipeline.robots import load_robot
 from rd_pipeline.robots.hulls import BodyHulls
 
@@ -149,3 +150,20 @@ def test_a_stretch_stuck_on_the_wrong_branch_is_solved_again() -> None:
         "joint_limit_violations",
     ):
         assert repaired[1][figure] == 0, figure
+
+
+def test_a_body_sliding_on_the_floor_keeps_its_targets_together() -> None:
+    """The performer crawls 3.5 m lying on the floor (ground2_subject3 164-184 s): the pelvis
+    touches the floor throughout but slides, so its target goes with the hips' instead of staying
+    where the touch began (1.15 m away from them when every touch was held)."""
+    robot = load_robot("g1")
+    params = RetargetConfig()
+    feet = FootMeshes.from_robot(robot).vertices
+    human = _excerpt("ground2_subject3", 164.0, 184.0)
+    targets = build_targets(human, robot, params.fps, feet, params.contact, params.shape, params.body_contact)
+    pelvis, left, right = (targets.bodies.index(b) for b in ("pelvis", "left_hip_roll_link", "right_hip_roll_link"))
+    hips = 0.5 * (targets.positions[:, left, :2] + targets.positions[:, right, :2])
+    apart = np.linalg.norm(targets.positions[:, pelvis, :2] - hips, axis=-1)
+    assert apart.max() < 0.2
+    # Until it slides, the touch is held like any rest.
+    assert 0 < targets.body_contact[:, pelvis].sum() < 0.5 * targets.n_frames

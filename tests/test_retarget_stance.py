@@ -69,7 +69,8 @@ def slack_pelvis() -> dict:
 
 @pytest.mark.slow
 def test_without_slack_the_planted_feet_slide(fixed_pelvis):
-    assert fixed_pelvis["skate_stance_mean_mm_s"] > 40.0
+    # Over twice the 15 mm/s skate bar (47 mm/s before resting bodies that slide were let go, 37 since).
+    assert fixed_pelvis["skate_stance_mean_mm_s"] > 30.0
 
 
 @pytest.mark.slow

@@ -31,20 +31,31 @@ def label_body_contacts(
     return contact
 
 
-def hold_in_contact(path: np.ndarray, contact: np.ndarray, fps: float, release_s: float) -> np.ndarray:
-    """(T, 3) a target path that stands still (horizontally) through each contact run.
+def hold_in_contact(
+    path: np.ndarray, contact: np.ndarray, human: np.ndarray, fps: float, settings: BodyContactConfig
+) -> tuple[np.ndarray, np.ndarray]:
+    """(T, 3) a target path that stands still (horizontally) while each contact run rests, and the
+    (T,) frames it is held.
 
-    The body stays where the run began; after the run, the offset to the free path fades out over
-    `release_s` with a smooth ease, so leaving the floor adds no jump.
+    The body stays where the run began until the `human` joint (scaled like the targets) has slid
+    `settings.hold_drift_m` from where it was then (crawling on the belly, sliding on the back):
+    from there on the run is not a rest, and the target follows its path. After a hold, the offset
+    to the free path fades out over `settings.release_s` with a smooth ease, so letting go adds no
+    jump.
     """
     held = path.copy()
-    release = max(1, int(round(release_s * fps)))
+    holding = np.zeros(contact.shape, dtype=bool)
+    release = max(1, int(round(settings.release_s * fps)))
     n_frames = path.shape[0]
     for start, end in contact_runs(contact):
+        slid = np.linalg.norm(human[start:end, :2] - human[start, :2], axis=-1) > settings.hold_drift_m
+        if slid.any():
+            end = start + int(np.argmax(slid))
         anchor = held[start, :2].copy()  # includes the fade of a run that ended just before
         held[start:end, :2] = anchor
+        holding[start:end] = True
         offset = anchor - path[end - 1, :2]
         after = np.arange(end, min(end + release, n_frames))
         fade = 1.0 - smoothstep((after - end + 1) / release)
         held[after, :2] = path[after, :2] + fade[:, None] * offset
-    return held
+    return held, holding

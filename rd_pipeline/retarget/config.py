@@ -73,6 +73,12 @@ class BodyContactConfig:
     """Joints never held by this rule: the feet are planted separately; hips and shoulders are rigid on the trunk."""
     release_s: float = 0.3
     """After a contact ends, the held target fades back to the human path over this time."""
+    hold_drift_m: float = 0.10
+    """A held target is let go for the rest of its contact once the human joint (scaled like the
+    targets) has slid this far, horizontally, from where it was when the hold began: the body
+    slides on the floor (crawling on the belly, sliding on the back) instead of resting, and
+    holding it would tear one body's targets apart (G1 ground2_subject3 164-184 s: a pelvis held
+    1.1 m away from its own hips)."""
 
 
 @dataclass(frozen=True)

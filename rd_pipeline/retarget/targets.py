@@ -164,8 +164,8 @@ def build_targets(
     _stand_on_soles(targets, foot_contact, foot_vertices)
     foot_lift = _plant_feet(clip, targets, orientations, foot_contact, foot_vertices, shape)
     keep_legs_reachable(targets, rest, fps, shape.reach_fraction, shape.leg_correction_smoothing_s)
-    resting = label_body_contacts(human_pos, index, joints, fps, body_contact)
-    _hold_resting_bodies(targets, joints, resting, fps, body_contact.release_s)
+    touching = label_body_contacts(human_pos, index, joints, fps, body_contact)
+    resting = _hold_resting_bodies(targets, joints, touching, human_pos * root_scale, index, fps, body_contact)
     return RetargetTargets(
         fps=fps,
         bodies=tuple(bodies),
@@ -313,14 +313,20 @@ def _plant_feet(
 def _hold_resting_bodies(
     targets: dict[str, np.ndarray],
     joints: list[str],
-    resting: np.ndarray,
+    touching: np.ndarray,
+    human_pos: np.ndarray,
+    index: dict[str, int],
     fps: float,
-    release_s: float,
-) -> None:
-    """Hold the target of each key body (in place) while it rests on the floor."""
+    settings: BodyContactConfig,
+) -> np.ndarray:
+    """Hold the target of each key body (in place) while it rests on the floor; (T, K) the frames
+    each is held (a body that slides along the floor touches it but does not rest)."""
+    resting = np.zeros_like(touching)
     for k, joint in enumerate(joints):
-        if resting[:, k].any():
-            targets[joint] = hold_in_contact(targets[joint], resting[:, k], fps, release_s)
+        if touching[:, k].any():
+            human = human_pos[:, index[joint]]
+            targets[joint], resting[:, k] = hold_in_contact(targets[joint], touching[:, k], human, fps, settings)
+    return resting
 
 
 def _mapped_ancestor(human: HumanMotion, joint: str, mapped: set[str]) -> str | None:
