@@ -74,11 +74,11 @@ PPO = "train.algorithm=ppo"
 ARMS: dict[str, tuple[str, ...]] = {
     "paper": (PPO,),
     # Initial action noise: the paper's 0.894 times the action scale down to MimicKit's scale.
-    "noise_0.5": (PPO, "train.ppo.init_noise_std=0.5",),
-    "noise_0.3": (PPO, "train.ppo.init_noise_std=0.3",),
-    "noise_0.1": (PPO, "train.ppo.init_noise_std=0.1",),
+    "noise_0.5": (PPO, "train.ppo.init_noise_std=0.5"),
+    "noise_0.3": (PPO, "train.ppo.init_noise_std=0.3"),
+    "noise_0.1": (PPO, "train.ppo.init_noise_std=0.1"),
     # The untrained residual policy at zero action, a small held noise (MimicKit's G1 tracker).
-    "output_0.01": (PPO, "train.ppo.init_output_gain=0.01",),
+    "output_0.01": (PPO, "train.ppo.init_output_gain=0.01"),
     "mimickit_noise": (
         PPO,
         "train.ppo.init_output_gain=0.01",
@@ -86,19 +86,19 @@ ARMS: dict[str, tuple[str, ...]] = {
         "train.ppo.learn_noise_std=false",
     ),
     # Action scale (the anchors' 0.25 * effort / kp per joint is 0.07-0.55 rad).
-    "action_scale_0.5": (PPO, "train.env.actions.scale=0.5",),
+    "action_scale_0.5": (PPO, "train.env.actions.scale=0.5"),
     # The anchors' lenient, height-only end-effector terminations while training.
-    "height_terminations": (PPO, "train.env.terminations.motion_far_height_only=true",),
+    "height_terminations": (PPO, "train.env.terminations.motion_far_height_only=true"),
     # Reference joints 0.1 and 0.5 s ahead in the actor's observation besides the next step's.
-    "future_frames": (PPO, "train.env.observations.ref_future_steps=5,25",),
+    "future_frames": (PPO, "train.env.observations.ref_future_steps=5,25"),
     # The sampler: uniform segments; failure credited to every visited segment.
-    "sampler_uniform": (PPO, "train.sampler.mode=uniform",),
-    "failure_visited": (PPO, "train.sampler.failure_credit=visited",),
+    "sampler_uniform": (PPO, "train.sampler.mode=uniform"),
+    "failure_visited": (PPO, "train.sampler.failure_credit=visited"),
     # PPO's update: fewer epochs, a lower learning rate, no entropy bonus, smaller networks.
-    "epochs_2": (PPO, "train.ppo.learning_epochs=2",),
-    "lr_3e-4": (PPO, "train.ppo.learning_rate=0.0003",),
-    "entropy_0": (PPO, "train.ppo.entropy_coef=0.0",),
-    "net_256": (PPO, "train.ppo.hidden_dims=256,128,64",),
+    "epochs_2": (PPO, "train.ppo.learning_epochs=2"),
+    "lr_3e-4": (PPO, "train.ppo.learning_rate=0.0003"),
+    "entropy_0": (PPO, "train.ppo.entropy_coef=0.0"),
+    "net_256": (PPO, "train.ppo.hidden_dims=256,128,64"),
     # The second learner: off-policy TD3 (FastTD3's recipe at CPU batch sizes), same environment.
     "td3": ("train.algorithm=td3",),
 }
