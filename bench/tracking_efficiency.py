@@ -165,8 +165,9 @@ def _survivors(rows: list[dict[str, Any]], eta: int) -> set[str]:
     """The arms of one rung that go on: the best 1/eta (at least one) by train's score, the mean
     over seeds. Every arm is judged against the whole rung (Optuna's successive-halving pruner is
     asynchronous: the first arm it judges at a rung always goes on, which made it unfit here)."""
-    by_arm = {arm: [row for row in rows if row["arm"] == arm] for arm in {row["arm"] for row in rows}}
-    ranked = sorted(by_arm, key=lambda arm: _mean(by_arm[arm], "train_score_s"), reverse=True)
+    by_arm = {arm: [row for row in rows if row["arm"] == arm] for arm in sorted({row["arm"] for row in rows})}
+    # Equal scores keep the arms' alphabetical order (the sort is stable), so a tie goes the same way every run.
+    ranked = sorted(by_arm, key=lambda arm: -_mean(by_arm[arm], "train_score_s"))
     return set(ranked[: max(1, len(ranked) // eta)])
 
 
@@ -368,16 +369,20 @@ def _curves(rows: list[dict[str, Any]], window: Window, path: Path) -> None:
         ("randomized_mean_s", "randomized_zero_action_mean_s", "fixed-grid mean, randomized (s)"),
         ("randomized_start_zero_s", None, "start-zero, randomized (s)"),
     )
-    figure, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.6))
+    figure, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels) + 2.0, 3.6))
+    # One colour per arm, the same in every figure (the default cycle repeats after ten).
+    palette = plt.get_cmap("tab20").colors
+    colors = {arm: palette[k % len(palette)] for k, arm in enumerate(ARMS)}
     millions = [row["samples"] / 1e6 for row in rows] or [1.0]
     for axis, (field, zero, title) in zip(axes, panels):
         for arm, rungs in _by_arm(rows).items():
             budgets = sorted(rungs)
             samples = [_mean(rungs[b], "samples") / 1e6 for b in budgets]
-            line = axis.plot(samples, [_mean(rungs[b], field) for b in budgets], marker="o", label=arm)[0]
+            means = [_mean(rungs[b], field) for b in budgets]
+            axis.plot(samples, means, marker="o", color=colors.get(arm), label=arm)
             for budget in budgets:
                 dots = [row[field] for row in rungs[budget]]
-                axis.scatter([_mean(rungs[budget], "samples") / 1e6] * len(dots), dots, color=line.get_color(), s=8)
+                axis.scatter([_mean(rungs[budget], "samples") / 1e6] * len(dots), dots, color=colors.get(arm), s=8)
         if zero is not None and rows:
             axis.axhline(_mean(rows, zero), color="grey", linestyle="--", label="zero action")
         axis.set_xscale("log")
@@ -388,9 +393,10 @@ def _curves(rows: list[dict[str, Any]], window: Window, path: Path) -> None:
         axis.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         axis.set_xlabel("M samples")
         axis.set_title(title, fontsize=10)
-    axes[0].legend(fontsize=8)
+    handles, labels = axes[0].get_legend_handles_labels()
+    figure.legend(handles, labels, loc="center right", fontsize=8)
     figure.suptitle(f"{window.robot} {window.motion} {window.clip} s ({window.source}): survival against samples")
-    figure.tight_layout()
+    figure.tight_layout(rect=(0.0, 0.0, 0.88, 1.0))
     figure.savefig(path, dpi=110)
     plt.close(figure)
 
