@@ -81,7 +81,7 @@ def _check(data: Any, source: Path) -> None:
         raise PipelineError(f"{source}: format_version {data['format_version']} is not {FORMAT_VERSION}")
     _check_joints(data["joints"], source)
     _check_action(data["action"], data["joints"]["policy"], source)
-    _check_observation(data["observation"], source)
+    _check_observation(data["observation"], len(data["joints"]["policy"]), source)
 
 
 def _check_schema(data: Any, source: Path) -> None:
@@ -130,8 +130,9 @@ def _check_action(action: dict[str, Any], policy: list[str], source: Path) -> No
         )
 
 
-def _check_observation(observation: dict[str, Any], source: Path) -> None:
-    """Terms with a name, size and scale, summing to the frame and, with the history, the whole."""
+def _check_observation(observation: dict[str, Any], policy_joints: int, source: Path) -> None:
+    """Terms with a name, size and scale, summing to the frame and, with the history, the whole;
+    the future reference frames' term as large as its steps say."""
     terms = observation["terms"]
     for i, term in enumerate(terms):
         for name, kind in (("name", str), ("size", int), ("scale", _NUMBER)):
@@ -140,6 +141,16 @@ def _check_observation(observation: dict[str, Any], source: Path) -> None:
     frame = sum(t["size"] for t in terms)
     if frame != observation["frame_size"] or frame * observation["history"] != observation["size"]:
         raise PipelineError(f"{source}: field 'observation.size' does not match its terms and history")
+    # Optional: only an actor that sees reference frames further ahead than the next has them.
+    steps = observation.get("ref_future_steps", [])
+    if not isinstance(steps, list) or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 1 for s in steps):
+        raise PipelineError(f"{source}: field 'observation.ref_future_steps' must be a list of integers of 1 or more")
+    future = sum(t["size"] for t in terms if t["name"] == "ref_joint_pos_future")
+    if future != len(steps) * policy_joints:
+        raise PipelineError(
+            f"{source}: field 'observation.ref_future_steps' names {len(steps)} steps of {policy_joints} joints, "
+            f"but the term 'ref_joint_pos_future' holds {future} values"
+        )
 
 
 def _name(kind: Any) -> str:

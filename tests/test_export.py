@@ -140,6 +140,18 @@ def test_policy_json_names_the_missing_field(tmp_path: Path) -> None:
     path.write_text(json.dumps(data))
     with pytest.raises(PipelineError, match=r"field 'rates' is missing"):
         load_policy_spec(path)
+    data = json.loads(json.dumps(spec.data))
+    data["observation"]["ref_future_steps"] = [5, "25"]
+    path.write_text(json.dumps(data))
+    with pytest.raises(
+        PipelineError, match=r"field 'observation.ref_future_steps' must be a list of integers of 1 or more$"
+    ):
+        load_policy_spec(path)
+    data["observation"]["ref_future_steps"] = [5, 25]
+    path.write_text(json.dumps(data))
+    holds = r"names 2 steps of 23 joints, but the term 'ref_joint_pos_future' holds 0 values$"
+    with pytest.raises(PipelineError, match=holds):
+        load_policy_spec(path)
 
 
 @pytest.mark.slow
