@@ -1,5 +1,6 @@
 """Floor contacts of the human's knees, elbows, hands, pelvis and torso, and targets that hold the
-matching robot bodies still while they last (the feet have their own planting in `targets`)."""
+matching robot bodies still while they rest, not while they slide (the feet have their own
+planting in `targets`)."""
 
 from __future__ import annotations
 
