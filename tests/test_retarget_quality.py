@@ -337,7 +337,11 @@ def test_knees_through_the_floor_are_seen_with_feet_clear(g1) -> None:
     np.testing.assert_allclose(mixed[1::2], sink[1::2], rtol=0, atol=1e-12)
     legs = {f"{side}_{link}" for side in ("left", "right") for link in ("hip_yaw_link", "knee_link")}
     assert quality["penetration_deepest_body"] in legs
-    assert quality_series(g1, reference)["penetration_m"].shape == (n_frames,)
+    series = quality_series(g1, reference)
+    assert series["penetration_m"].shape == (n_frames,)
+    # The deepest body is the argmax over every body's lowest point, though only bodies whose
+    # bound reaches below the floor are looked at.
+    np.testing.assert_array_equal(series["penetration_body"], lowest.argmin(axis=1))
 
 
 def test_pelvis_height_and_divergence_rulers(g1) -> None:

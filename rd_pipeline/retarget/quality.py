@@ -121,12 +121,10 @@ def quality_series(
         raise PipelineError("reference motion has no frames")
     dt = 1.0 / reference.fps
     hulls = BodyHulls.from_robot(robot)
-    depth = -hulls.lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
-    deepest = depth.argmax(axis=1)
-    penetration = np.maximum(depth.max(axis=1), 0.0)
+    penetration, deepest = hulls.deepest_below_floor(reference.body_pos_w, reference.body_quat_w, reference.body_names)
     series = {
         "penetration_m": penetration,
-        "penetration_body": np.where(penetration > 0, deepest, -1),
+        "penetration_body": deepest,
         "root_speed_m_s": np.linalg.norm(_gradient(reference.root_pos, dt), axis=-1),
     }
     if keypoint_targets is not None:

@@ -91,19 +91,35 @@ class BodyHulls:
 
     def sink_depth(self, body_pos_w: np.ndarray, body_quat_w: np.ndarray, body_names: Sequence[str]) -> np.ndarray:
         """(T,) how far the deepest body reaches below the floor (0 where none does), from body poses
-        (T, B, 3), (T, B, 4 wxyz): `lowest_z`'s minimum clipped at 0, with each body's points only
-        looked at in the frames where its `lowest_bound` is below the floor."""
+        (T, B, 3), (T, B, 4 wxyz): `lowest_z`'s minimum clipped at 0."""
+        return self.deepest_below_floor(body_pos_w, body_quat_w, body_names)[0]
+
+    def deepest_below_floor(
+        self,
+        body_pos_w: np.ndarray,
+        body_quat_w: np.ndarray,
+        body_names: Sequence[str],
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(T,) `sink_depth`, and (T,) the index into `body_names` of this class of the deepest body
+        (-1 where none is below; the first of equals, as an argmax over `lowest_z`).
+
+        Each body's points are only looked at in the frames where its `lowest_bound` is below the
+        floor: on a whole take most bodies are far above it in most frames."""
         columns = [list(body_names).index(body) for body in self.body_names]
         pos = body_pos_w[:, columns]
         quat = body_quat_w[:, columns]
         bound = self.lowest_bound(pos[..., 2], _rotation_z_row(quat))
         depth = np.zeros(body_pos_w.shape[0])
+        deepest = np.full(body_pos_w.shape[0], -1)
         for k, (points, radii) in enumerate(zip(self.points, self.radii)):
             near = np.flatnonzero(bound[:, k] < 0.0)
-            if near.size:
-                lowest = support_lowest_z(pos[near, k], quat[near, k], points, radii)
-                depth[near] = np.maximum(depth[near], -lowest)
-        return depth
+            if near.size == 0:
+                continue
+            sunk = -support_lowest_z(pos[near, k], quat[near, k], points, radii)
+            deeper = sunk > depth[near]
+            depth[near[deeper]] = sunk[deeper]
+            deepest[near[deeper]] = k
+        return depth, deepest
 
     def lowest_z(self, body_pos_w: np.ndarray, body_quat_w: np.ndarray, body_names: Sequence[str]) -> np.ndarray:
         """(T, N) lowest world z of each body's collision geometry from body poses (T, B, 3), (T, B, 4 wxyz)."""
