@@ -101,6 +101,9 @@ ARMS: dict[str, tuple[str, ...]] = {
     "net_256": (PPO, "train.ppo.hidden_dims=256,128,64"),
     # The second learner: off-policy TD3 (FastTD3's recipe at CPU batch sizes), same environment.
     "td3": ("train.algorithm=td3",),
+    # TD3 looking ahead: at 4 and 8 M samples its rollouts from the window's start end at the
+    # reference's fastest hand moves, which the next step's reference alone does not announce.
+    "td3_future_frames": ("train.algorithm=td3", "train.env.observations.ref_future_steps=5,25"),
 }
 """Arm -> its `--set` overrides on the `cpu` profile (each lever of PPO's recipe, one at a time, and TD3)."""
 
