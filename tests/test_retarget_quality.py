@@ -19,7 +19,7 @@ from rd_pipeline.retarget.floor import FloorLimit, SupportCandidates
 from rd_pipeline.retarget.quality import FootMeshes, QualityThresholds, quality_series, retarget_quality
 from rd_pipeline.robots import Robot, load_robot
 from rd_pipeline.robots.config import available_robots
-from rd_pipeline.robots.hulls import BodyHulls
+from rd_pipeline.robots.hulls import BodyHulls, hull_vertices, mesh_points_in_body
 from rd_pipeline.robots.model import collision_geoms
 
 KEYS = {
@@ -427,3 +427,23 @@ def test_a_geom_the_floor_ruler_cannot_measure_is_named() -> None:
     assert str(error.value) == (
         "robot model: collision geom belly of body 'torso' is a mjGEOM_ELLIPSOID, which the floor ruler cannot measure"
     )
+
+
+def test_mesh_hulls_are_made_once_per_model_and_shared_read_only(g1) -> None:
+    """The IK, the floor ruler and the skate ruler of one retarget share each hull: the second ask
+    returns the first's array, equal to a hull made afresh, and nobody can write into it."""
+    first = FootMeshes.from_robot(g1).vertices[0]
+    again = FootMeshes.from_robot(g1).vertices[0]
+    assert again is first
+    assert not first.flags.writeable
+    model = g1.model
+    foot = g1.body_ids[g1.config.foot_bodies[0]]
+    meshes = [
+        g
+        for g in range(model.ngeom)
+        if model.geom_bodyid[g] == foot and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH
+    ]
+    fresh = hull_vertices(np.concatenate([mesh_points_in_body(model, g) for g in meshes]))
+    np.testing.assert_array_equal(first, fresh)
+    hulls = BodyHulls.from_robot(g1)
+    np.testing.assert_array_equal(BodyHulls.from_robot(g1).points[0], hulls.points[0])

@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.reference import ReferenceMotion
 from rd_pipeline.robots import Robot
-from rd_pipeline.robots.hulls import BodyHulls, hull_vertices, mesh_points_in_body, support_lowest_z
+from rd_pipeline.robots.hulls import BodyHulls, mesh_hull_in_body, support_lowest_z
 from rd_pipeline.robots.model import collision_geom_pairs
 
 QUALITY_FILE = "quality.json"
@@ -82,8 +82,7 @@ class FootMeshes:
             ]
             if not geoms:
                 raise PipelineError(f"{robot.config.source}: foot body '{body}' has no mesh geom to measure")
-            points = np.concatenate([mesh_points_in_body(model, g) for g in geoms])
-            per_foot.append(hull_vertices(points))
+            per_foot.append(mesh_hull_in_body(model, tuple(geoms)))
         return cls(body_names=robot.config.foot_bodies, vertices=(per_foot[0], per_foot[1]))
 
     def lowest_z(self, body_pos_w: np.ndarray, body_quat_w: np.ndarray, body_names: Sequence[str]) -> np.ndarray:

@@ -7,6 +7,7 @@ mesh's convex-hull vertices (radius 0). The floor ruler and the IK ground limit 
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -163,6 +164,23 @@ def mesh_points_in_body(model: mujoco.MjModel, geom: int) -> np.ndarray:
     return _to_body(model, geom, vertices)
 
 
+def mesh_hull_in_body(model: mujoco.MjModel, geoms: tuple[int, ...]) -> np.ndarray:
+    """(V, 3) hull vertices of the mesh geoms `geoms` together, in their body's frame; computed once
+    per model: a retarget asks for the same hulls in its IK and in its floor and skate rulers, and
+    each G1 hull set took a third of a second."""
+    known = _MESH_HULLS.setdefault(model, {})
+    if geoms not in known:
+        points = np.concatenate([mesh_points_in_body(model, g) for g in geoms])
+        hull = hull_vertices(points)
+        hull.flags.writeable = False  # shared by every caller
+        known[geoms] = hull
+    return known[geoms]
+
+
+_MESH_HULLS: weakref.WeakKeyDictionary[mujoco.MjModel, dict[tuple[int, ...], np.ndarray]] = weakref.WeakKeyDictionary()
+"""Per model, the hulls `mesh_hull_in_body` made, by geoms; dropped with the model."""
+
+
 def hull_vertices(points: np.ndarray) -> np.ndarray:
     """The extreme point along any direction is a hull vertex, so the hull is all a lowest-point query needs."""
     try:
@@ -175,7 +193,7 @@ def _geom_support(model: mujoco.MjModel, geom: int) -> tuple[np.ndarray, np.ndar
     kind = model.geom_type[geom]
     size = model.geom_size[geom]
     if kind == mujoco.mjtGeom.mjGEOM_MESH:
-        vertices = hull_vertices(mesh_points_in_body(model, geom))
+        vertices = mesh_hull_in_body(model, (geom,))
         return vertices, np.zeros(len(vertices))
     if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
         return _to_body(model, geom, np.zeros((1, 3))), np.array([size[0]])
