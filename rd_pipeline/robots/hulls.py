@@ -164,10 +164,14 @@ def mesh_points_in_body(model: mujoco.MjModel, geom: int) -> np.ndarray:
     return _to_body(model, geom, vertices)
 
 
+_MESH_HULLS: weakref.WeakKeyDictionary[mujoco.MjModel, dict[tuple[int, ...], np.ndarray]] = weakref.WeakKeyDictionary()
+"""Per model, the hulls `mesh_hull_in_body` made, by geoms; dropped with the model."""
+
+
 def mesh_hull_in_body(model: mujoco.MjModel, geoms: tuple[int, ...]) -> np.ndarray:
     """(V, 3) hull vertices of the mesh geoms `geoms` together, in their body's frame; computed once
     per model: a retarget asks for the same hulls in its IK and in its floor and skate rulers, and
-    each G1 hull set took a third of a second."""
+    G1's took a third of a second each time."""
     known = _MESH_HULLS.setdefault(model, {})
     if geoms not in known:
         points = np.concatenate([mesh_points_in_body(model, g) for g in geoms])
@@ -175,10 +179,6 @@ def mesh_hull_in_body(model: mujoco.MjModel, geoms: tuple[int, ...]) -> np.ndarr
         hull.flags.writeable = False  # shared by every caller
         known[geoms] = hull
     return known[geoms]
-
-
-_MESH_HULLS: weakref.WeakKeyDictionary[mujoco.MjModel, dict[tuple[int, ...], np.ndarray]] = weakref.WeakKeyDictionary()
-"""Per model, the hulls `mesh_hull_in_body` made, by geoms; dropped with the model."""
 
 
 def hull_vertices(points: np.ndarray) -> np.ndarray:
