@@ -445,5 +445,3 @@ def test_mesh_hulls_are_made_once_per_model_and_shared_read_only(g1) -> None:
     ]
     fresh = hull_vertices(np.concatenate([mesh_points_in_body(model, g) for g in meshes]))
     np.testing.assert_array_equal(first, fresh)
-    hulls = BodyHulls.from_robot(g1)
-    np.testing.assert_array_equal(BodyHulls.from_robot(g1).points[0], hulls.points[0])
