@@ -129,7 +129,7 @@ def main() -> None:
     elif not args.report:
         _study(args, window, folder)
     rows = _rows(folder)
-    _table(rows, folder / "table.md", args.eta)
+    _table(rows, folder / "table.md", args.eta, args.threshold)
     _curves(rows, window, folder / "curves.png")
 
 
@@ -145,6 +145,9 @@ def _parser() -> argparse.ArgumentParser:
         "--profile", default="cpu", help="cpu (2-16 cores) or paper (a GPU: --jobs 1, rungs of 10s of M)"
     )
     parser.add_argument("--report", action="store_true", help="only redraw the table and the curves")
+    parser.add_argument(
+        "--threshold", type=float, default=2.5, help="start-zero (s) every seed must reach, for samples to threshold"
+    )
     parser.add_argument(
         "--pictures", action="store_true", help="filmstrips of the trained --arms and --seeds at the last of --rungs"
     )
@@ -308,8 +311,9 @@ def _verdict(rows: list[dict[str, Any]], arm: str, rung: float, eta: int) -> str
     return "goes on" if arm in _survivors(at_rung, eta) else "stopped"
 
 
-def _table(rows: list[dict[str, Any]], path: Path, eta: int) -> None:
-    """Per arm and budget: the seeds' mean figures, hours, train's score and the verdict."""
+def _table(rows: list[dict[str, Any]], path: Path, eta: int, threshold: float) -> None:
+    """Per arm and budget: the seeds' mean figures, hours, train's score and the verdict; then
+    the bar, each arm's samples to `threshold` and what each rung's verdicts cost."""
     fields = ("nominal_start_zero_s", "nominal_mean_s", "randomized_start_zero_s", "randomized_mean_s")
     lines = [
         "| arm | M samples | seeds | "
@@ -337,11 +341,33 @@ def _table(rows: list[dict[str, Any]], path: Path, eta: int) -> None:
         "",
         f"Bar (nominal start-zero >= 9.5 s and fixed-grid mean >= 4.5 s on every seed): {', '.join(met) or 'not met'}",
         "",
+        f"Samples to threshold (nominal start-zero >= {threshold:g} s on every seed, the first budget that reaches it):",
+        "",
+        *_samples_to_threshold(rows, threshold),
+        "",
         "What each rung's verdict cost (every run's training up to that budget, at its median iteration):",
         "",
         *_costs(rows),
     ]
     path.write_text("\n".join(lines) + "\n")
+
+
+def _samples_to_threshold(rows: list[dict[str, Any]], threshold: float) -> list[str]:
+    """Per arm: its first budget whose every seed holds the window `threshold` seconds from its
+    start on nominal physics, or the largest budget it ran without reaching it."""
+    lines = []
+    for arm, rungs in _by_arm(rows).items():
+        reached = [
+            rung
+            for rung, seeds in sorted(rungs.items())
+            if all(row["nominal_start_zero_s"] >= threshold for row in seeds)
+        ]
+        if reached:
+            hours = _mean(rungs[reached[0]], "wall_h")
+            lines.append(f"- {arm}: {reached[0]:g} M samples, {hours:.2f} h a seed")
+        else:
+            lines.append(f"- {arm}: not within {max(rungs):g} M samples")
+    return lines
 
 
 def _costs(rows: list[dict[str, Any]]) -> list[str]:
