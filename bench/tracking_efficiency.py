@@ -15,9 +15,10 @@ after every live arm has run a rung, the best 1/eta by train's own score at that
 by the validation figures this bench reports.
 
 Writes `bench/results/tracking_efficiency/<window>/`: `runs/<arm>_seed<k>_<M>M.json` (samples,
-hours, train's score, the validation's figures, the train and validate keys, the
-commit), `curves.png` and `table.md`; with `--pictures`, `pictures/` (the start-zero rollout of
-each arm and seed at the last rung beside its reference, filmstrip and video).
+hours, train's score, the validation's figures, the train and validate keys, the commit),
+`curves.png` and `table.md` (per arm and budget the figures and the verdict, then the bar,
+samples to `--threshold` and each rung's cost); with `--pictures`, `pictures/` (the start-zero
+rollout of each arm and seed at the last rung beside its reference, filmstrip and video).
 """
 
 from __future__ import annotations
