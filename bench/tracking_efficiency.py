@@ -380,7 +380,8 @@ def _costs(rows: list[dict[str, Any]]) -> list[str]:
             so_far[(row["arm"], row["seed"])] = row  # a run's hours grow with its budget
         hours = sum(row["wall_h_at_median_iteration"] for row in so_far.values())
         arms = len({row["arm"] for row in rows if row["rung_m"] == rung})
-        lines.append(f"- {rung:g} M samples: {arms} arms judged, {hours:.2f} h of the machine so far")
+        judged = f"{arms} arm{'' if arms == 1 else 's'} judged"
+        lines.append(f"- {rung:g} M samples: {judged}, {hours:.2f} h of the machine so far")
     return lines
 
 
