@@ -135,13 +135,19 @@ def main() -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=__doc__.split(".")[0])
     parser.add_argument("--window", choices=WINDOWS, default="g1_d1s2")
     parser.add_argument("--arms", nargs="+", choices=ARMS, default=list(ARMS))
     parser.add_argument("--seeds", nargs="+", type=int, default=[0, 1])
     parser.add_argument("--rungs", nargs="+", type=float, default=[1, 2, 4, 8], help="budgets in M samples")
     parser.add_argument("--eta", type=int, default=2, help="1/eta of the arms go on at each rung")
-    parser.add_argument("--jobs", type=int, default=2, help="pipelines at once (threads split the cores)")
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=2,
+        help="pipelines at once; their threads split the cores and enter the train key, so a study "
+        "grown in a later sitting keeps its --jobs (else it trains from scratch)",
+    )
     parser.add_argument(
         "--profile", default="cpu", help="cpu (2-16 cores) or paper (a GPU: --jobs 1, rungs of 10s of M)"
     )
