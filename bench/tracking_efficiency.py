@@ -342,7 +342,7 @@ def _table(rows: list[dict[str, Any]], path: Path, eta: int, threshold: float) -
         f"{arm} at {rung:g} M"
         for arm, rungs in _by_arm(rows).items()
         for rung, seeds in sorted(rungs.items())
-        if all(row[field] >= bar for row in seeds for field, bar in BAR.items())
+        if _every_seed_meets(seeds, BAR)
     ]
     lines += [
         "",
@@ -359,6 +359,11 @@ def _table(rows: list[dict[str, Any]], path: Path, eta: int, threshold: float) -
     path.write_text("\n".join(lines) + "\n")
 
 
+def _every_seed_meets(seeds: list[dict[str, Any]], bars: dict[str, float]) -> bool:
+    """Whether every seed's row reaches every field's bar."""
+    return all(row[field] >= bar for row in seeds for field, bar in bars.items())
+
+
 def _samples_to_threshold(rows: list[dict[str, Any]], threshold: float) -> list[str]:
     """Per arm: its first budget whose every seed holds the window `threshold` seconds from its
     start on nominal physics, or the largest budget it ran without reaching it."""
@@ -367,7 +372,7 @@ def _samples_to_threshold(rows: list[dict[str, Any]], threshold: float) -> list[
         reached = [
             rung
             for rung, seeds in sorted(rungs.items())
-            if all(row["nominal_start_zero_s"] >= threshold for row in seeds)
+            if _every_seed_meets(seeds, {"nominal_start_zero_s": threshold})
         ]
         if reached:
             hours = _mean(rungs[reached[0]], "wall_h")
