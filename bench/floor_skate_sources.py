@@ -27,6 +27,8 @@ from rd_pipeline.robots import load_robot
 
 def main() -> None:
     args = _parser().parse_args()
+    if not args.rows.is_file():
+        raise SystemExit(f"{args.rows}: no such retarget_variants log")
     rows = [json.loads(line) for line in args.rows.read_text().splitlines()]
     missing = [row for row in rows if row["ours"]["skate_stance_mean_mm_s"] > args.bar]
     out = [_sources(row, args.near) for row in missing]
