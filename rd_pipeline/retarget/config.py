@@ -213,6 +213,32 @@ class IkConfig:
 
 
 @dataclass(frozen=True)
+class PlantLockConfig:
+    """The last pass over planted feet: each plant's foot held at one point by its leg's joints."""
+
+    iterations: int = 6
+    """Damped least-squares steps per planted frame at most (0: no lock)."""
+    tolerance_m: float = 0.0001
+    """A frame whose planted feet are all this close to their points takes no more steps."""
+    damping: float = 1e-6
+    """Damping (m^2) of each step: keeps a leg near straight from flailing for the last millimetre."""
+    reach_m: float = 0.02
+    """A held foot never moves more than this from where the earlier passes put it: past that, it
+    slides along with them (pulling a dragged foot all the way back flips the leg)."""
+    slip_m: float = 0.002
+    """A held foot the leg leaves farther than this from its point is held from where it is."""
+    release_s: float = 0.1
+    """After a foot lifts, seconds over which the hold eases off."""
+    max_step_rad: float = 0.2
+    """Largest change of any leg joint in one step."""
+    step_halvings: int = 2
+    """A step that takes the feet farther from their points is halved up to this many times."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "tolerance_m", "damping", "reach_m", "slip_m", "release_s", "max_step_rad")
+
+
+@dataclass(frozen=True)
 class LagRepair:
     """When and how a stretch of frames that fell far behind its targets is solved again.
 
@@ -260,6 +286,8 @@ class RetargetConfig:
     """IK iterations, limits and the sequence-level smoothing."""
     repair: LagRepair = LagRepair()
     """When stretches that fell far behind their targets are solved again."""
+    plant_lock: PlantLockConfig = PlantLockConfig()
+    """How planted feet are held still in the end."""
 
     def __post_init__(self) -> None:
         require_positive(self, "fps")

@@ -13,6 +13,7 @@ from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
 from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.retarget.ik import RetargetIk
+from rd_pipeline.retarget.plant_lock import lock_plants
 from rd_pipeline.retarget.quality import FootMeshes, colliding_frames
 from rd_pipeline.retarget.repair import repair_lag
 from rd_pipeline.retarget.smoothing import blend_configurations, resample_configurations, smooth_cover
@@ -75,7 +76,7 @@ def retarget(
         refined = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames, "feet on the smoothed motion"))
         if settings.pelvis_slack_m > 0:
             refined = _pelvis_slack(ik, qpos, refined)
-        qpos = refined
+        qpos = lock_plants(robot, refined, targets.foot_contact, rate, params.plant_lock, settings)
     if rate != fps:
         targets = build_targets(human, robot, fps, feet.vertices, params.contact, params.shape, params.body_contact)
         qpos = _resampled(robot, qpos, rate, np.arange(targets.n_frames) / fps, settings.pair_depth_limit_m)

@@ -1,0 +1,211 @@
+"""Planted feet held still: each planted foot stays where it landed, moved by its leg's joints.
+
+The refinements before this pass trade the planted foot against a posture and a pelvis that
+move: on floor work the foot stays within millimetres of its target but jitters about it, and
+the skate ruler reads that jitter as sliding. Here a foot that lands is held at the point where
+it landed, frame by frame, by a few damped least-squares steps of that leg's joints alone. Where
+the leg cannot reach the point (a range limit, a velocity limit) the foot slides only as far as
+it must, and is held from there on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from rd_pipeline.retarget.config import IkConfig, PlantLockConfig
+from rd_pipeline.retarget.quality import colliding_frames
+from rd_pipeline.retarget.smoothing import blend_configurations, smoothstep
+from rd_pipeline.robots import Robot
+
+
+@dataclass
+class _Hold:
+    """Where one foot is held, and for how many frames it has been released."""
+
+    point: np.ndarray
+    released: int = 0
+
+
+def lock_plants(
+    robot: Robot,
+    qpos: np.ndarray,
+    contact: np.ndarray,
+    fps: float,
+    settings: PlantLockConfig,
+    ik: IkConfig,
+) -> np.ndarray:
+    """`qpos` (T, nq) with every planted foot (`contact` (T, 2), one column per foot body) held
+    where it landed. Joints stay within the retarget range and within `ik`'s share of their
+    velocity limits from the previous frame; no body pair goes deeper than `ik`'s hard limit where
+    `qpos` kept it clear."""
+    if settings.iterations == 0:
+        return qpos
+    model = robot.model
+    data = mujoco.MjData(model)
+    feet = [robot.body_ids[foot] for foot in robot.config.foot_bodies]
+    chains = [_leg_joints(robot, body) for body in feet]
+    free = _foot_positions(model, data, qpos, feet)
+    max_step = robot.config.velocity_limit / fps * ik.velocity_margin
+    release = max(1, round(settings.release_s * fps))
+    lower, upper = robot.retarget_range.T
+    joints = robot.qpos_indices
+    holds: list[_Hold | None] = [None] * len(feet)
+    out = qpos.copy()
+    for t in range(len(qpos)):
+        low = lower
+        high = upper
+        if t > 0:
+            # Frames after a held one come back to the earlier passes' pose within the joints'
+            # velocity, like the frames they follow.
+            low = np.maximum(lower, out[t - 1, joints] - max_step)
+            high = np.minimum(upper, out[t - 1, joints] + max_step)
+            out[t, joints] = np.clip(out[t, joints], low, high)
+        for k in range(len(feet)):
+            holds[k] = _update_hold(holds[k], bool(contact[t, k]), free[t, k], release)
+            hold = holds[k]
+            if hold is None:
+                continue
+            goal = _goal(hold, free[t, k], release, settings.reach_m)
+            reached = _reach(robot, data, out[t], goal, feet[k], chains[k], (low, high), settings)
+            # Out of reach, the foot slides as far as it must and is held from there.
+            if contact[t, k] and np.linalg.norm(reached - hold.point) > settings.slip_m:
+                hold.point = reached
+    return _clear_pairs(robot, qpos, out, ik.pair_depth_limit_m)
+
+
+def _clear_pairs(robot: Robot, free: np.ndarray, held: np.ndarray, depth_m: float) -> np.ndarray:
+    """`held`, eased back towards `free` a quarter at a time in the frames where holding a foot
+    took a configured body pair (a knee into the other leg) deeper than `depth_m`."""
+    for t in np.flatnonzero(colliding_frames(robot, held, depth_m) & ~colliding_frames(robot, free, depth_m)):
+        for weight in (0.25, 0.5, 0.75, 1.0):
+            candidate = blend_configurations(held[t : t + 1], free[t : t + 1], np.array([weight]))
+            if not colliding_frames(robot, candidate, depth_m)[0]:
+                break
+        held[t] = candidate[0]
+    return held
+
+
+def _update_hold(hold: _Hold | None, planted: bool, free: np.ndarray, release: int) -> _Hold | None:
+    """A foot that lands is held where it is; one that lifts is released over `release` frames."""
+    if planted:
+        if hold is None or hold.released > 0:
+            return _Hold(free.copy())
+        return hold
+    if hold is None:
+        return None
+    hold.released += 1
+    return hold if hold.released <= release else None
+
+
+def _goal(hold: _Hold, free: np.ndarray, release: int, reach_m: float) -> np.ndarray:
+    """Where the foot goes this frame: the held point, at most `reach_m` from where the foot
+    would be without the hold, easing back to that after a release."""
+    pull = hold.point - free
+    length = float(np.linalg.norm(pull))
+    weight = 1.0 - smoothstep(np.asarray(hold.released / release))
+    return free + pull * float(weight) * min(1.0, reach_m / max(length, 1e-9))
+
+
+def _reach(
+    robot: Robot,
+    data: mujoco.MjData,
+    q: np.ndarray,
+    goal: np.ndarray,
+    foot: int,
+    joints: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    settings: PlantLockConfig,
+) -> np.ndarray:
+    """Move the leg `joints` of `q` (in place) towards putting `foot` on `goal`, within `bounds`;
+    a step that leaves the foot farther from its goal is halved, then not taken. Returns where
+    the foot ends."""
+    model = robot.model
+    jacobian = np.zeros((3, model.nv))
+    columns = robot.qpos_indices[joints]
+    limits = (bounds[0][joints], bounds[1][joints])
+    best = _goal_distance(model, data, q, goal, foot)
+    for _ in range(settings.iterations):
+        if best < settings.tolerance_m:
+            break
+        mujoco.mj_comPos(model, data)
+        mujoco.mj_jacBody(model, data, jacobian, None, foot)
+        jac = jacobian[:, robot.dof_indices[joints]]
+        trial = q.copy()
+        trial[columns] = _bounded_step(jac, goal - data.xpos[foot], q[columns], limits, settings)
+        distance = _goal_distance(model, data, trial, goal, foot)
+        for _ in range(settings.step_halvings):
+            if distance < best:
+                break
+            trial = 0.5 * (q + trial)
+            distance = _goal_distance(model, data, trial, goal, foot)
+        if distance >= best:
+            break
+        q[:] = trial
+        best = distance
+    data.qpos[:] = q
+    mujoco.mj_kinematics(model, data)
+    return data.xpos[foot].copy()
+
+
+def _goal_distance(model: mujoco.MjModel, data: mujoco.MjData, q: np.ndarray, goal: np.ndarray, foot: int) -> float:
+    """The foot's distance from `goal` in `q` (which `data` then holds)."""
+    data.qpos[:] = q
+    mujoco.mj_kinematics(model, data)
+    return float(np.linalg.norm(goal - data.xpos[foot]))
+
+
+def _bounded_step(
+    jacobian: np.ndarray,
+    error: np.ndarray,
+    joints: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    settings: PlantLockConfig,
+) -> np.ndarray:
+    """`joints` after a damped least-squares step towards `error`: a joint the step would take
+    past its bound is held at the bound and the step solved again with the others."""
+    low, high = bounds
+    out = np.clip(joints, low, high)
+    moving = np.ones(len(joints), dtype=bool)
+    while moving.any():
+        residual = error - jacobian @ (out - joints)
+        step = _damped_step(jacobian[:, moving], residual, settings.damping)
+        step *= min(1.0, settings.max_step_rad / max(float(np.abs(step).max()), 1e-12))
+        trial = out.copy()
+        trial[moving] += step
+        outside = (trial < low) | (trial > high)
+        if not outside.any():
+            return trial
+        out[outside] = np.clip(trial, low, high)[outside]
+        moving &= ~outside
+    return out
+
+
+def _foot_positions(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, feet: list[int]) -> np.ndarray:
+    """(T, feet, 3) the foot bodies' positions in each row of `qpos`."""
+    positions = np.empty((len(qpos), len(feet), 3))
+    for t, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        positions[t] = data.xpos[feet]
+    return positions
+
+
+def _leg_joints(robot: Robot, foot: int) -> np.ndarray:
+    """Indices (into the robot's joint list) of the joints between the pelvis and `foot`."""
+    model = robot.model
+    chain = []
+    body = foot
+    while body > 0:
+        chain.append(body)
+        body = model.body_parentid[body]
+    bodies = model.jnt_bodyid[model.dof_jntid[robot.dof_indices]]
+    return np.flatnonzero(np.isin(bodies, chain))
+
+
+def _damped_step(jacobian: np.ndarray, error: np.ndarray, damping: float) -> np.ndarray:
+    """The least-norm joint step that moves the foot by `error`, damped near singular legs."""
+    gram = jacobian @ jacobian.T + damping * np.eye(len(error))
+    return jacobian.T @ np.linalg.solve(gram, error)
