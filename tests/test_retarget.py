@@ -98,11 +98,13 @@ def test_planted_feet_stay_put_and_follow_their_sole_target(g1_dance: RetargetRe
     # target beyond the ankle's range is followed as far as the range allows. The foot orientation
     # cost trades sole tilt for stillness: at 5 (the default) this excerpt measures tilt p95 5.3 deg,
     # max 18.2, and plants slide at most 3.9 mm; at 10, tilt p95 3.2, max 13.6, slides up to 8.3 mm.
+    # The plant lock, which holds the foot's position with the leg's joints alone, trades tilt too:
+    # p95 5.1 -> 6.2 deg, max 17.2 -> 18.0, median slide 0.56 -> 0.06 mm, largest 3.4 -> 2.5 mm.
     angles = np.concatenate(angles)
-    assert np.percentile(angles, 95) < 6.0 and angles.max() < 20.0
+    assert np.percentile(angles, 95) < 7.0 and angles.max() < 20.0
     assert np.concatenate(flat).mean() > 0.5
     slides = np.array(slides)
-    assert np.median(slides) < 0.0015 and slides.max() < 0.01
+    assert np.median(slides) < 0.0002 and slides.max() < 0.005
 
 
 def test_scale_comes_from_the_models() -> None:

@@ -79,7 +79,9 @@ def lock_plants(
 def _clear_pairs(robot: Robot, free: np.ndarray, held: np.ndarray, depth_m: float) -> np.ndarray:
     """`held`, eased back towards `free` a quarter at a time in the frames where holding a foot
     took a configured body pair (a knee into the other leg) deeper than `depth_m`."""
-    for t in np.flatnonzero(colliding_frames(robot, held, depth_m) & ~colliding_frames(robot, free, depth_m)):
+    changed = np.flatnonzero(np.any(held != free, axis=1))
+    colliding = changed[colliding_frames(robot, held[changed], depth_m)]
+    for t in colliding[~colliding_frames(robot, free[colliding], depth_m)]:
         for weight in (0.25, 0.5, 0.75, 1.0):
             candidate = blend_configurations(held[t : t + 1], free[t : t + 1], np.array([weight]))
             if not colliding_frames(robot, candidate, depth_m)[0]:
