@@ -19,6 +19,7 @@ from rd_pipeline.retarget.config import IkConfig, PlantLockConfig
 from rd_pipeline.retarget.quality import colliding_frames
 from rd_pipeline.retarget.smoothing import blend_configurations, smoothstep
 from rd_pipeline.robots import Robot
+from rd_pipeline.robots.model import leg_joints
 
 
 @dataclass
@@ -46,7 +47,8 @@ def lock_plants(
     model = robot.model
     data = mujoco.MjData(model)
     feet = [robot.body_ids[foot] for foot in robot.config.foot_bodies]
-    chains = [_leg_joints(robot, body) for body in feet]
+    names = robot.config.joint_names
+    chains = [np.array([names.index(j) for j in leg_joints(robot, (foot,))]) for foot in robot.config.foot_bodies]
     free = _foot_positions(model, data, qpos, feet)
     max_step = robot.config.velocity_limit / fps * ik.velocity_margin
     release = max(1, round(settings.release_s * fps))
@@ -193,18 +195,6 @@ def _foot_positions(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray
         mujoco.mj_kinematics(model, data)
         positions[t] = data.xpos[feet]
     return positions
-
-
-def _leg_joints(robot: Robot, foot: int) -> np.ndarray:
-    """Indices (into the robot's joint list) of the joints between the pelvis and `foot`."""
-    model = robot.model
-    chain = []
-    body = foot
-    while body > 0:
-        chain.append(body)
-        body = model.body_parentid[body]
-    bodies = model.jnt_bodyid[model.dof_jntid[robot.dof_indices]]
-    return np.flatnonzero(np.isin(bodies, chain))
 
 
 def _damped_step(jacobian: np.ndarray, error: np.ndarray, damping: float) -> np.ndarray:

@@ -155,11 +155,11 @@ def collision_geom_pairs(robot: Robot) -> np.ndarray:
     return np.array(pairs, dtype=np.int64).reshape(-1, 2)
 
 
-def leg_joints(robot: Robot) -> list[str]:
-    """Config joints on the chains from the root body to the feet, in config order."""
+def leg_joints(robot: Robot, feet: tuple[str, ...] | None = None) -> list[str]:
+    """Config joints on the chains from the root body to `feet` (default: both feet), in config order."""
     model = robot.model
     on_chain: set[str] = set()
-    for foot in robot.config.foot_bodies:
+    for foot in robot.config.foot_bodies if feet is None else feet:
         body = robot.body_ids[foot]
         while body > 0:
             for joint in range(model.body_jntadr[body], model.body_jntadr[body] + model.body_jntnum[body]):
