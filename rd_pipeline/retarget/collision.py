@@ -1,5 +1,5 @@
 """The QP's collision avoidance between the robot config's body pairs (mink's limit, on every geom
-the step check counts)."""
+the step check counts), and the easing back of a pose that a pass after the QP took into contact."""
 
 from __future__ import annotations
 
@@ -7,9 +7,12 @@ import copy
 
 import mink
 import mujoco
+import numpy as np
 
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.retarget.config import IkConfig
+from rd_pipeline.retarget.quality import colliding_frames
+from rd_pipeline.retarget.smoothing import blend_configurations
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.model import collision_geom_pairs, collision_geoms
 
@@ -63,3 +66,13 @@ def colliding_copy(model: mujoco.MjModel, pairs: list[tuple[list[int], list[int]
         marked.geom_contype[geom] |= 1
         marked.geom_conaffinity[geom] |= 1
     return marked
+
+
+def eased_until_clear(robot: Robot, pose: np.ndarray, toward: np.ndarray, depth_m: float) -> np.ndarray:
+    """`pose` (nq,) blended towards `toward` a quarter at a time until no configured body pair is
+    deeper than `depth_m` (at most all the way to `toward`)."""
+    for weight in (0.25, 0.5, 0.75, 1.0):
+        candidate = blend_configurations(pose[None], toward[None], np.array([weight]))[0]
+        if not colliding_frames(robot, candidate[None], depth_m)[0]:
+            break
+    return candidate

@@ -15,9 +15,10 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from rd_pipeline.retarget.collision import eased_until_clear
 from rd_pipeline.retarget.config import IkConfig, PlantLockConfig
 from rd_pipeline.retarget.quality import colliding_frames
-from rd_pipeline.retarget.smoothing import blend_configurations, smoothstep
+from rd_pipeline.retarget.smoothing import smoothstep
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.model import leg_joints
 
@@ -84,11 +85,7 @@ def _clear_pairs(robot: Robot, free: np.ndarray, held: np.ndarray, depth_m: floa
     changed = np.flatnonzero(np.any(held != free, axis=1))
     colliding = changed[colliding_frames(robot, held[changed], depth_m)]
     for t in colliding[~colliding_frames(robot, free[colliding], depth_m)]:
-        for weight in (0.25, 0.5, 0.75, 1.0):
-            candidate = blend_configurations(held[t : t + 1], free[t : t + 1], np.array([weight]))
-            if not colliding_frames(robot, candidate, depth_m)[0]:
-                break
-        held[t] = candidate[0]
+        held[t] = eased_until_clear(robot, held[t], free[t], depth_m)
     return held
 
 

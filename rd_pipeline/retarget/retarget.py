@@ -11,6 +11,7 @@ from scipy.ndimage import binary_dilation, gaussian_filter1d
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_trajectory
+from rd_pipeline.retarget.collision import eased_until_clear
 from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.retarget.ik import RetargetIk
 from rd_pipeline.retarget.plant_lock import lock_plants
@@ -144,11 +145,7 @@ def _resampled(robot: Robot, qpos: np.ndarray, rate: float, times: np.ndarray, d
     out = resample_configurations(qpos, rate, times)
     for j in np.flatnonzero(colliding_frames(robot, out, depth_m)):
         nearest = qpos[min(int(round(times[j] * rate)), len(qpos) - 1)]
-        for weight in (0.25, 0.5, 0.75, 1.0):
-            candidate = blend_configurations(out[j : j + 1], nearest[None], np.array([weight]))
-            if not colliding_frames(robot, candidate, depth_m)[0]:
-                break
-        out[j] = candidate[0]
+        out[j] = eased_until_clear(robot, out[j], nearest, depth_m)
     return out
 
 
