@@ -19,7 +19,6 @@ from rd_pipeline.artifacts.stage import Stage, StageContext
 from rd_pipeline.artifacts.store import ArtifactRef, ArtifactStore
 from rd_pipeline.errors import Interrupted, PipelineError
 from rd_pipeline.files import failed_write, folder_bytes, write_failure
-from rd_pipeline.lazy import load_deferred
 
 
 @dataclass(frozen=True)
@@ -147,7 +146,6 @@ def _run_stage(entry: PlannedStage, context: StageContext) -> None:
     write is one line."""
     out = context.out_dir
     began = time.perf_counter()
-    load_deferred()
     try:
         metrics = entry.stage.run(context)
         seconds = time.perf_counter() - began

@@ -68,14 +68,17 @@ class FloorLimit(mink.Limit):
         near = np.flatnonzero((lowest < clearance + self.detection) & (index >= 0))
         if len(near) == 0:
             return mink.Constraint()
+        bodies = self.body_ids[near]
+        local = np.array([self.points[k][index[k]] for k in near])
+        # One stacked product: each row is the matrix-vector product of one body, as alone.
+        rotated = np.matmul(data.xmat[bodies].reshape(-1, 3, 3), local[:, :, None])[:, :, 0]
+        points = data.xpos[bodies] + rotated
         rows = np.empty((len(near), self.model.nv))
-        h = np.empty(len(near))
-        for row, k in enumerate(near):
-            body = int(self.body_ids[k])
-            point = data.xpos[body] + data.xmat[body].reshape(3, 3) @ self.points[k][index[k]]
-            mujoco.mj_jac(self.model, data, self.jacobian, None, point, body)
-            rows[row] = -self.jacobian[2]
-            h[row] = lowest[k] - clearance[k]
+        for row, body in enumerate(bodies.tolist()):
+            mujoco.mj_jac(self.model, data, self.jacobian, None, points[row], body)
+            rows[row] = self.jacobian[2]
+        np.negative(rows, out=rows)
+        h = lowest[near] - clearance[near]
         if self.relaxed:
             h = np.maximum(h, 0.0)
         return mink.Constraint(G=rows, h=h)

@@ -59,7 +59,7 @@ class RetargetIk:
         )
         self.floor_raise = _swing_floor_raise(targets, hulls, config.foot_bodies, settings.swing_floor_fraction)
         self.collision_pairs = collision_geom_pairs(robot)
-        self.pair_reach = model.geom_rbound[self.collision_pairs].sum(axis=1)
+        self.pair_reach_squared = model.geom_rbound[self.collision_pairs].sum(axis=1) ** 2
         self.depth_known_at: tuple[np.ndarray, float] | None = None
         self.frame = 0  # the frame being solved, named when no step is found
         avoidance = collision_limit(robot, settings)
@@ -221,11 +221,10 @@ class RetargetIk:
         pairs = self.collision_pairs
         if len(pairs) == 0:
             return 0.0
-        gap = np.linalg.norm(data.geom_xpos[pairs[:, 0]] - data.geom_xpos[pairs[:, 1]], axis=1)
-        candidates = pairs[gap < self.pair_reach]  # bounding spheres overlap
-        distances = []
-        for a, b in candidates:
-            distances.append(mujoco.mj_geomDistance(self.robot.model, data, int(a), int(b), 0.0, None))
+        gap = data.geom_xpos[pairs[:, 0]] - data.geom_xpos[pairs[:, 1]]
+        # Bounding spheres overlap; a pair they keep apart cannot touch, whatever the rounding.
+        candidates = pairs[np.einsum("ij,ij->i", gap, gap) < self.pair_reach_squared]
+        distances = [mujoco.mj_geomDistance(self.robot.model, data, a, b, 0.0, None) for a, b in candidates.tolist()]
         return max(0.0, -min(distances, default=0.0))
 
     def _step(self, tasks: list[mink.Task]) -> np.ndarray:

@@ -42,9 +42,12 @@ class KeyBodiesTask(mink.Task):
         self.body_costs = cost
         self.targets = np.zeros((len(body_ids), 7))
         self.targets[:, 0] = 1.0
-        self.world_jacobian = np.empty((6, model.nv))
-        self.errors = np.empty(6 * len(body_ids))
-        self.jacobians = np.empty((6 * len(body_ids), model.nv))
+        count = len(body_ids)
+        self.world_jacobians = np.empty((count, 6, model.nv))
+        self.adjoints = np.empty((count, 6, 6))
+        self.log_jacobians = np.empty((count, 6, 6))
+        self.errors = np.empty(6 * count)
+        self.jacobians = np.empty((6 * count, model.nv))
 
     def set_targets(self, poses: np.ndarray) -> None:
         """(K, 7) wxyz_xyz target pose of each body."""
@@ -69,24 +72,32 @@ class KeyBodiesTask(mink.Task):
         errors, jacobians = self._errors_and_jacobians(configuration)
         weighted_errors = self.cost * (-self.gain * errors)
         weighted_jacobians = self.cost[:, None] * jacobians
+        # Each body's squared error as its own dot product (a stacked matmul), summed body by
+        # body, as mink sums the frame tasks' terms.
+        body_errors = weighted_errors.reshape(-1, 6)
+        squared = np.matmul(body_errors[:, None, :], body_errors[:, :, None]).ravel()
         mu = 0.0
-        # Summed body by body, as mink sums the frame tasks' terms.
-        for body_error in weighted_errors.reshape(-1, 6):
-            mu += self.lm_damping * float(body_error @ body_error)
+        for body_squared in squared.tolist():
+            mu += self.lm_damping * body_squared
         return weighted_jacobians, weighted_errors, mu
 
     def _errors_and_jacobians(self, configuration: mink.Configuration) -> tuple[np.ndarray, np.ndarray]:
         """(6K,) body twists to the targets and (6K, nv) their Jacobians, in the body frames."""
         data = configuration.data
+        errors = self.errors.reshape(-1, 6)
         for k, (body, target) in enumerate(zip(self.body_ids, self.targets)):
-            rows = slice(6 * k, 6 * k + 6)
             xmat = data.xmat[body]
             frame = lie.xmat_xpos_to_wxyz_xyz(xmat, data.xpos[body])
-            mujoco.mj_jacBody(self.model, data, self.world_jacobian[:3], self.world_jacobian[3:], body)
-            body_jacobian = lie.se3_rotation_adjoint_from_xmat(xmat) @ self.world_jacobian
-            self.errors[rows] = lie.se3_rminus(target, frame)
-            log_jacobian = lie.se3_jlog(lie.se3_inverse_multiply(target, frame))
-            np.matmul(-log_jacobian, body_jacobian, out=self.jacobians[rows])
+            jacobian = self.world_jacobians[k]
+            mujoco.mj_jacBody(self.model, data, jacobian[:3], jacobian[3:], body)
+            self.adjoints[k] = lie.se3_rotation_adjoint_from_xmat(xmat)
+            errors[k] = lie.se3_rminus(target, frame)
+            self.log_jacobians[k] = lie.se3_jlog(lie.se3_inverse_multiply(target, frame))
+        # The products FrameTask takes per body, as one stacked product each: the same
+        # per-body matrix products, without a Python call per body.
+        body_jacobians = np.matmul(self.adjoints, self.world_jacobians)
+        np.negative(self.log_jacobians, out=self.log_jacobians)
+        np.matmul(self.log_jacobians, body_jacobians, out=self.jacobians.reshape(len(self.body_ids), 6, -1))
         return self.errors, self.jacobians
 
 
