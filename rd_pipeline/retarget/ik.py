@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import ctypes
 from collections import deque
 from collections.abc import Iterable
 
+import daqp
 import mink
 import mujoco
 import numpy as np
@@ -253,7 +255,11 @@ class RetargetIk:
         built = mink.build_ik(self.configuration, tasks, dt=1.0, damping=self.damping, limits=self.limits)
         assert built.G is not None and built.h is not None  # the step limit always bounds the step
         bounded = np.isfinite(built.h)
-        problem = qpsolvers.Problem(built.P, built.q, built.G[bounded], built.h[bounded])
+        inequalities = built.G[bounded]
+        bounds = built.h[bounded]
+        if self.settings.solver == "daqp":
+            return _solve_daqp(built.P, built.q, inequalities, bounds)
+        problem = qpsolvers.Problem(built.P, built.q, inequalities, bounds)
         result = qpsolvers.solve_problem(problem, solver=self.settings.solver)
         if not result.found or result.x is None:
             raise mink.NoSolutionFound(self.settings.solver)
@@ -333,6 +339,17 @@ class RetargetIk:
             self.configuration.update(q)
             errors[k] = self._keypoint_error(first + k)
         return errors
+
+
+def _solve_daqp(P: np.ndarray, q: np.ndarray, G: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """min 1/2 x'Px + q'x subject to Gx <= h, by DAQP called as qpsolvers calls it, without the
+    wrapper's checks and copies (a fifth of each solve's time): the same solution, bit for bit."""
+    no_lower_bound = np.full(len(h), -1e30)
+    inequality = np.zeros(len(h), dtype=ctypes.c_int)
+    x, _, exitflag, _ = daqp.solve(P, q, G, h, no_lower_bound, inequality)
+    if exitflag <= 0:
+        raise mink.NoSolutionFound("daqp")
+    return x
 
 
 def _frame_step_limit(robot: Robot, fps: float, velocity_margin: float) -> FrameStepLimit:
