@@ -44,7 +44,6 @@ class KeyBodiesTask(mink.Task):
         self.targets[:, 0] = 1.0
         count = len(body_ids)
         self.world_jacobians = np.empty((count, 6, model.nv))
-        self.adjoints = np.empty((count, 6, 6))
         self.log_jacobians = np.empty((count, 6, 6))
         self.errors = np.empty(6 * count)
         self.jacobians = np.empty((6 * count, model.nv))
@@ -90,14 +89,17 @@ class KeyBodiesTask(mink.Task):
             frame = lie.xmat_xpos_to_wxyz_xyz(xmat, data.xpos[body])
             jacobian = self.world_jacobians[k]
             mujoco.mj_jacBody(self.model, data, jacobian[:3], jacobian[3:], body)
-            self.adjoints[k] = lie.se3_rotation_adjoint_from_xmat(xmat)
             errors[k] = lie.se3_rminus(target, frame)
             self.log_jacobians[k] = lie.se3_jlog(lie.se3_inverse_multiply(target, frame))
-        # The products FrameTask takes per body, as one stacked product each: the same
-        # per-body matrix products, without a Python call per body.
-        body_jacobians = np.matmul(self.adjoints, self.world_jacobians)
+        # FrameTask's products per body, stacked: the world Jacobian into the body frame (its
+        # rotation adjoint is R^T on the linear and the angular rows, the same numbers as mink's
+        # 6x6 product), then through the log's Jacobian.
+        count = len(self.body_ids)
+        to_body = data.xmat[self.body_ids].reshape(count, 1, 3, 3).transpose(0, 1, 3, 2)
+        world = self.world_jacobians.reshape(count, 2, 3, -1)
+        body_jacobians = np.matmul(to_body, world).reshape(count, 6, -1)
         np.negative(self.log_jacobians, out=self.log_jacobians)
-        np.matmul(self.log_jacobians, body_jacobians, out=self.jacobians.reshape(len(self.body_ids), 6, -1))
+        np.matmul(self.log_jacobians, body_jacobians, out=self.jacobians.reshape(count, 6, -1))
         return self.errors, self.jacobians
 
 
