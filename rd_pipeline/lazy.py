@@ -15,6 +15,7 @@ submodule (`torch.distributed`) of the half-loaded module aborted the process (t
 from __future__ import annotations
 
 import importlib
+import sys
 from types import ModuleType
 from typing import Any
 
@@ -30,5 +31,5 @@ class _Deferred(ModuleType):
 
 
 def lazy_import(name: str) -> ModuleType:
-    """The module `name`: already imported, or imported on first use."""
-    return _Deferred(name)
+    """The module `name` if it is already imported, else a stand-in that imports it on first use."""
+    return sys.modules.get(name) or _Deferred(name)

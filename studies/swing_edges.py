@@ -36,7 +36,12 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("docs/images/floor_skate_swing_edges_h1.png"))
     args = parser.parse_args()
     robot = load_robot(args.robot)
-    clip = dict(clips(args.take, "floor_cut"))[args.clip]
+    cuts = dict(clips(args.take, "floor_cut"))
+    if args.clip not in cuts:
+        raise SystemExit(
+            f"--clip {args.clip!r}: not a floor cut of {args.take} (its cuts: {', '.join(cuts) or 'none'})"
+        )
+    clip = cuts[args.clip]
     result, quality, _ = retarget_and_score(clip, robot)
     reference = result.reference
     targets = result.targets
