@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from rd_pipeline.motion.contact import ContactThresholds
-from rd_pipeline.params import require_positive
+from rd_pipeline.params import require_non_negative, require_positive
 
 
 @dataclass(frozen=True)
@@ -239,6 +239,32 @@ class PlantLockConfig:
 
 
 @dataclass(frozen=True)
+class MovingFootClearance:
+    """The last pass over swinging feet: a foot that travels is off the floor.
+
+    The robot's foot trails a fast swing target (by up to 12 cm on quick floor steps), so it
+    comes down to the floor while it still travels to where it will be held, and leaves the floor
+    after it has started to travel: for those frames it is dragged over the floor.
+    """
+
+    clearance_m: float = 0.03
+    """A foot that is not planted and travels is lifted by its leg until its lowest point is at
+    least this high (0: no pass)."""
+    speed_m_s: float = 0.05
+    """A foot travels while its horizontal speed is above this."""
+    detour_m: float = 0.001
+    """A lift that turns the foot so that its horizontal path through the frame grows by more
+    than this is not taken: the foot would travel more, not less."""
+    passes: int = 3
+    """Passes over the take: a lift that moves a foot sideways makes its neighbouring frames
+    travel, and the next pass lifts those."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "speed_m_s", "detour_m", "passes")
+        require_non_negative(self, "clearance_m")
+
+
+@dataclass(frozen=True)
 class LagRepair:
     """When and how a stretch of frames that fell far behind its targets is solved again.
 
@@ -288,6 +314,8 @@ class RetargetConfig:
     """When stretches that fell far behind their targets are solved again."""
     plant_lock: PlantLockConfig = PlantLockConfig()
     """How planted feet are held still in the end."""
+    moving_feet: MovingFootClearance = MovingFootClearance()
+    """How feet that travel between plants are kept off the floor."""
 
     def __post_init__(self) -> None:
         require_positive(self, "fps")

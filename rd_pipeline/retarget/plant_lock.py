@@ -72,14 +72,14 @@ def lock_plants(
             if hold is None:
                 continue
             goal = _goal(hold, free[t, k], release, settings.reach_m)
-            reached = _reach(robot, data, out[t], goal, feet[k], chains[k], (low, high), settings)
+            reached = reach(robot, data, out[t], goal, feet[k], chains[k], (low, high), settings)
             # Out of reach, the foot slides as far as it must and is held from there.
             if contact[t, k] and np.linalg.norm(reached - hold.point) > settings.slip_m:
                 hold.point = reached
-    return _clear_pairs(robot, qpos, out, ik.pair_depth_limit_m)
+    return clear_pairs(robot, qpos, out, ik.pair_depth_limit_m)
 
 
-def _clear_pairs(robot: Robot, free: np.ndarray, held: np.ndarray, depth_m: float) -> np.ndarray:
+def clear_pairs(robot: Robot, free: np.ndarray, held: np.ndarray, depth_m: float) -> np.ndarray:
     """`held`, eased back towards `free` a quarter at a time in the frames where holding a foot
     took a configured body pair (a knee into the other leg) deeper than `depth_m`."""
     changed = np.flatnonzero(np.any(held != free, axis=1))
@@ -110,7 +110,7 @@ def _goal(hold: _Hold, free: np.ndarray, release: int, reach_m: float) -> np.nda
     return free + pull * float(weight) * min(1.0, reach_m / max(length, 1e-9))
 
 
-def _reach(
+def reach(
     robot: Robot,
     data: mujoco.MjData,
     q: np.ndarray,

@@ -14,6 +14,7 @@ from rd_pipeline.motion.reference import ReferenceMotion, reference_from_joint_t
 from rd_pipeline.retarget.collision import eased_until_clear
 from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.retarget.ik import RetargetIk
+from rd_pipeline.retarget.moving_feet import lift_moving_feet
 from rd_pipeline.retarget.plant_lock import lock_plants
 from rd_pipeline.retarget.quality import FootMeshes, colliding_frames
 from rd_pipeline.retarget.repair import repair_lag
@@ -78,6 +79,9 @@ def retarget(
         if settings.pelvis_slack_m > 0:
             refined = _pelvis_slack(ik, qpos, refined)
         qpos = lock_plants(robot, refined, targets.foot_contact, rate, params.plant_lock, settings)
+        qpos = lift_moving_feet(
+            robot, qpos, targets.foot_contact, rate, params.moving_feet, params.plant_lock, settings
+        )
     if rate != fps:
         targets = build_targets(human, robot, fps, feet.vertices, params.contact, params.shape, params.body_contact)
         qpos = _resampled(robot, qpos, rate, np.arange(targets.n_frames) / fps, settings.pair_depth_limit_m)
