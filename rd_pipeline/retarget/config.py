@@ -255,13 +255,16 @@ class MovingFootClearance:
     detour_m: float = 0.001
     """A lift that turns the foot so that its horizontal path through the frame grows by more
     than this is not taken: the foot would travel more, not less."""
+    turn_weight_m: float = 0.05
+    """How much the foot keeps its orientation while it rises (m of position per radian): a
+    foot lifted by its position alone pitches toe-down and its sole rises less than its body."""
     passes: int = 3
     """Passes over the take: a lift that moves a foot sideways makes its neighbouring frames
     travel, and the next pass lifts those."""
 
     def __post_init__(self) -> None:
         require_positive(self, "speed_m_s", "detour_m", "passes")
-        require_non_negative(self, "clearance_m")
+        require_non_negative(self, "clearance_m", "turn_weight_m")
 
 
 @dataclass(frozen=True)

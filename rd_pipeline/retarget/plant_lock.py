@@ -72,7 +72,7 @@ def lock_plants(
             if hold is None:
                 continue
             goal = _goal(hold, free[t, k], release, settings.reach_m)
-            reached = reach(robot, data, out[t], goal, feet[k], chains[k], (low, high), settings)
+            reached = _reach(robot, data, out[t], goal, feet[k], chains[k], (low, high), settings)
             # Out of reach, the foot slides as far as it must and is held from there.
             if contact[t, k] and np.linalg.norm(reached - hold.point) > settings.slip_m:
                 hold.point = reached
@@ -110,7 +110,7 @@ def _goal(hold: _Hold, free: np.ndarray, release: int, reach_m: float) -> np.nda
     return free + pull * float(weight) * min(1.0, reach_m / max(length, 1e-9))
 
 
-def reach(
+def _reach(
     robot: Robot,
     data: mujoco.MjData,
     q: np.ndarray,
@@ -135,7 +135,7 @@ def reach(
         mujoco.mj_jacBody(model, data, jacobian, None, foot)
         jac = jacobian[:, robot.dof_indices[joints]]
         trial = q.copy()
-        trial[columns] = _bounded_step(jac, goal - data.xpos[foot], q[columns], limits, settings)
+        trial[columns] = bounded_step(jac, goal - data.xpos[foot], q[columns], limits, settings)
         distance = _goal_distance(model, data, trial, goal, foot)
         for _ in range(settings.step_halvings):
             if distance < best:
@@ -158,7 +158,7 @@ def _goal_distance(model: mujoco.MjModel, data: mujoco.MjData, q: np.ndarray, go
     return float(np.linalg.norm(goal - data.xpos[foot]))
 
 
-def _bounded_step(
+def bounded_step(
     jacobian: np.ndarray,
     error: np.ndarray,
     joints: np.ndarray,
