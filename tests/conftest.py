@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rd_pipeline.robots import Robot, load_robot
+
 PROJECT = Path(__file__).resolve().parent.parent
 SHARED = PROJECT.parent / "shared"
 
@@ -31,6 +33,12 @@ LAFAN_DIR = Path(os.environ["RD_LAFAN_DIR"])
 RETARGETED_DIR = Path(os.environ["RD_RETARGETED_DIR"])
 ROBOT_ASSETS = Path(os.environ["RD_ROBOT_ASSETS"])
 MISSING_DATA = [str(p) for p in (LAFAN_DIR, RETARGETED_DIR, ROBOT_ASSETS) if not p.is_dir()]
+
+
+@pytest.fixture(scope="session")
+def g1() -> Robot:
+    """The G1 model, loaded once."""
+    return load_robot("g1")
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -11,16 +11,11 @@ from rd_pipeline.params import ParamRangeError
 from rd_pipeline.retarget.config import IkConfig, MovingFootClearance, PlantLockConfig
 from rd_pipeline.retarget.moving_feet import lift_moving_feet
 from rd_pipeline.retarget.quality import FootMeshes
-from rd_pipeline.robots import Robot, load_robot
+from rd_pipeline.robots import Robot
 from rd_pipeline.robots.model import leg_joints
 
 FPS = 50.0
 FRAMES = 40
-
-
-@pytest.fixture(scope="module")
-def g1() -> Robot:
-    return load_robot("g1")
 
 
 def _gliding(robot: Robot, speed_m_s: float) -> np.ndarray:

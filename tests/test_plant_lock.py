@@ -5,18 +5,12 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
-import pytest
 
 from rd_pipeline.retarget.config import IkConfig, PlantLockConfig
 from rd_pipeline.retarget.plant_lock import lock_plants
-from rd_pipeline.robots import Robot, load_robot
+from rd_pipeline.robots import Robot
 
 FPS = 50.0
-
-
-@pytest.fixture(scope="module")
-def g1() -> Robot:
-    return load_robot("g1")
 
 
 def _standing(robot: Robot, frames: int) -> np.ndarray:

@@ -53,11 +53,6 @@ ELBOW_IN_TORSO = {"left_shoulder_pitch_joint": 0.25, "left_shoulder_roll_joint":
 
 
 @pytest.fixture(scope="module")
-def g1() -> Robot:
-    return load_robot("g1")
-
-
-@pytest.fixture(scope="module")
 def g1_dance(g1) -> tuple[ReferenceMotion, dict]:
     path = RETARGETED_DIR / "g1" / "dance1_subject2.csv"
     reference = import_retargeted_csv(path, g1, 30.0, 50.0, "cubic", ContactThresholds()).reference
