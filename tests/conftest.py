@@ -8,11 +8,14 @@ import shutil
 import signal
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
+import mujoco
 import numpy as np
 import pytest
 
+from rd_pipeline.retarget.config import IkConfig
 from rd_pipeline.robots import Robot, load_robot
 
 PROJECT = Path(__file__).resolve().parent.parent
@@ -39,6 +42,39 @@ MISSING_DATA = [str(p) for p in (LAFAN_DIR, RETARGETED_DIR, ROBOT_ASSETS) if not
 def g1() -> Robot:
     """The G1 model, loaded once."""
     return load_robot("g1")
+
+
+@pytest.fixture
+def foot_positions() -> Callable[[Robot, np.ndarray], np.ndarray]:
+    """(T, 2, 3) the robot's foot bodies' positions in each row of a (T, nq) motion."""
+
+    def positions(robot: Robot, qpos: np.ndarray) -> np.ndarray:
+        data = mujoco.MjData(robot.model)
+        feet = [robot.body_ids[foot] for foot in robot.config.foot_bodies]
+        out = np.empty((len(qpos), 2, 3))
+        for t, q in enumerate(qpos):
+            data.qpos[:] = q
+            mujoco.mj_kinematics(robot.model, data)
+            out[t] = data.xpos[feet]
+        return out
+
+    return positions
+
+
+@pytest.fixture
+def limit_breaches() -> Callable[[Robot, np.ndarray, float], tuple[int, int]]:
+    """Counts, in a (T, nq) motion at `fps`: joint values outside the robot's retarget range, and
+    frame steps over the IK's share of its velocity limits."""
+
+    def count(robot: Robot, qpos: np.ndarray, fps: float) -> tuple[int, int]:
+        joints = qpos[:, robot.qpos_indices]
+        lower, upper = robot.retarget_range.T
+        outside = int(np.sum((joints < lower) | (joints > upper)))
+        step_limit = robot.config.velocity_limit / fps * IkConfig().velocity_margin + 1e-9
+        too_fast = int(np.sum(np.abs(np.diff(joints, axis=0)) > step_limit))
+        return outside, too_fast
+
+    return count
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -3,7 +3,8 @@ jitters, slides no farther than it must under one that runs away, and lets go wh
 
 from __future__ import annotations
 
-import mujoco
+from collections.abc import Callable
+
 import numpy as np
 
 from rd_pipeline.retarget.config import IkConfig, PlantLockConfig
@@ -22,66 +23,58 @@ def _standing(robot: Robot, frames: int) -> np.ndarray:
     return np.tile(q, (frames, 1))
 
 
-def _feet(robot: Robot, qpos: np.ndarray) -> np.ndarray:
-    """(T, 2, 3) the foot bodies' positions."""
-    data = mujoco.MjData(robot.model)
-    feet = [robot.body_ids[foot] for foot in robot.config.foot_bodies]
-    out = np.empty((len(qpos), 2, 3))
-    for t, q in enumerate(qpos):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(robot.model, data)
-        out[t] = data.xpos[feet]
-    return out
-
-
 def _lock(robot: Robot, qpos: np.ndarray, contact: np.ndarray) -> np.ndarray:
     return lock_plants(robot, qpos, contact, FPS, PlantLockConfig(), IkConfig())
 
 
-def test_a_planted_foot_stays_put_under_a_jittering_pelvis(g1: Robot) -> None:
+def test_a_planted_foot_stays_put_under_a_jittering_pelvis(
+    g1: Robot, foot_positions: Callable[[Robot, np.ndarray], np.ndarray]
+) -> None:
     qpos = _standing(g1, 50)
     # Sideways and fore-aft; a rising pelvis would straighten the default pose's legs.
     jitter = np.random.default_rng(0).uniform(-0.004, 0.004, size=(50, 2))
     qpos[:, :2] += jitter
     contact = np.ones((50, 2), dtype=bool)
-    before = _feet(g1, qpos)
-    after = _feet(g1, _lock(g1, qpos, contact))
+    before = foot_positions(g1, qpos)
+    after = foot_positions(g1, _lock(g1, qpos, contact))
     drift_before = np.linalg.norm(before - before[0], axis=-1).max()
     drift_after = np.linalg.norm(after - after[0], axis=-1).max()
     assert drift_before > 0.004
     assert drift_after < 0.0002
 
 
-def test_the_lock_keeps_joint_ranges_and_velocities(g1: Robot) -> None:
+def test_the_lock_keeps_joint_ranges_and_velocities(
+    g1: Robot, limit_breaches: Callable[[Robot, np.ndarray, float], tuple[int, int]]
+) -> None:
     qpos = _standing(g1, 50)
     qpos[:, :3] += np.random.default_rng(1).uniform(-0.004, 0.004, size=(50, 3))
     locked = _lock(g1, qpos, np.ones((50, 2), dtype=bool))
-    joints = locked[:, g1.qpos_indices]
-    lower, upper = g1.retarget_range.T
-    assert np.all((joints >= lower) & (joints <= upper))
-    step = np.abs(np.diff(joints, axis=0))
-    assert np.all(step <= g1.config.velocity_limit / FPS * IkConfig().velocity_margin + 1e-9)
+    assert limit_breaches(g1, locked, FPS) == (0, 0)
 
 
-def test_a_foot_the_pelvis_drags_slides_only_past_the_reach(g1: Robot) -> None:
+def test_a_foot_the_pelvis_drags_slides_only_past_the_reach(
+    g1: Robot, foot_positions: Callable[[Robot, np.ndarray], np.ndarray]
+) -> None:
     qpos = _standing(g1, 100)
     qpos[:, 0] += np.linspace(0.0, 0.10, 100)  # the pelvis walks 10 cm forward
     contact = np.ones((100, 2), dtype=bool)
-    before = _feet(g1, qpos)
-    after = _feet(g1, _lock(g1, qpos, contact))
+    before = foot_positions(g1, qpos)
+    after = foot_positions(g1, _lock(g1, qpos, contact))
     # Held while the earlier pose is within reach (0.02 m), then carried along at the reach.
     reach = PlantLockConfig().reach_m
     assert np.abs(after[:15, :, 0] - after[0, :, 0]).max() < 0.001
     assert np.abs(after[-1, :, 0] - before[-1, :, 0] + reach).max() < 0.002
 
 
-def test_a_lifted_foot_is_released_over_the_release_time(g1: Robot) -> None:
+def test_a_lifted_foot_is_released_over_the_release_time(
+    g1: Robot, foot_positions: Callable[[Robot, np.ndarray], np.ndarray]
+) -> None:
     qpos = _standing(g1, 60)
     qpos[:, 1] += 0.01 * np.sin(np.arange(60) / 3.0)  # the pelvis sways sideways
     contact = np.ones((60, 2), dtype=bool)
     contact[30:, 0] = False  # the left foot lifts at frame 30
-    before = _feet(g1, qpos)
-    after = _feet(g1, _lock(g1, qpos, contact))
+    before = foot_positions(g1, qpos)
+    after = foot_positions(g1, _lock(g1, qpos, contact))
     release = round(PlantLockConfig().release_s * FPS)
     assert np.linalg.norm(after[29, 0] - after[0, 0]) < 0.001
     assert np.linalg.norm(after[30 + release :, 0] - before[30 + release :, 0], axis=-1).max() < 0.0005
