@@ -36,7 +36,7 @@ from bench.retarget_variants import BARS, FLOOR_CUT, _wider_ranges, clips
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.lafan_joints import FEET
 from rd_pipeline.retarget.retarget import RetargetResult
-from rd_pipeline.retarget.targets import resample_human
+from rd_pipeline.retarget.targets import RetargetTargets, resample_human
 from rd_pipeline.robots import Robot, load_robot
 
 BAR_M = BARS["pelvis_height_dev_p95_m"]
@@ -84,7 +84,7 @@ def _report(robot: Robot, name: str) -> dict:
     own_result, _, _ = retarget_and_score(clip, robot)
     own = _scored(robot, own_result)
     wider = _scored(_wider_ranges(robot), retarget_and_score(clip, _wider_ranges(robot))[0])
-    on_back = _planted_on_back(clip, own_result)
+    on_back = planted_on_back(clip, own_result.targets)
     stretches = [
         _stretch(robot, own, wider, on_back, frames, own_result.reference.fps) for frames in _over_bar(own, own_result)
     ]
@@ -117,13 +117,13 @@ def _scored(robot: Robot, result: RetargetResult) -> _Scored:
     return _Scored(difference - np.median(difference), result.targets.human_pelvis[:, 2], at_bound)
 
 
-def _planted_on_back(clip: HumanMotion, result: RetargetResult) -> np.ndarray:
+def planted_on_back(clip: HumanMotion, targets: RetargetTargets) -> np.ndarray:
     """(T,) bool: the targets plant a human foot whose sole faces away from the floor by more than
     `BACK_DEG`. A foot's sole direction (in its own frame) is the one that points up, on
     average, over the frames the targets plant it while the human stands."""
-    _, rotations, names = resample_human(clip, result.reference.fps)
-    planted = result.targets.foot_contact.astype(bool)
-    hips = result.targets.human_pelvis[:, 2]
+    _, rotations, names = resample_human(clip, targets.fps)
+    planted = targets.foot_contact.astype(bool)
+    hips = targets.human_pelvis[:, 2]
     standing = hips >= STANDING * hips.max()
     on_back = np.zeros(len(planted), dtype=bool)
     for side, foot in enumerate(FEET):
