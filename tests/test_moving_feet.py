@@ -48,7 +48,8 @@ def _soles(robot: Robot, qpos: np.ndarray) -> np.ndarray:
 
 def _lift(robot: Robot, qpos: np.ndarray, contact: np.ndarray, **settings: float) -> np.ndarray:
     clearance = MovingFootClearance(**settings)  # type: ignore[arg-type]
-    return lift_moving_feet(robot, qpos, contact, FPS, clearance, PlantLockConfig(), IkConfig())
+    meshes = FootMeshes.from_robot(robot)
+    return lift_moving_feet(robot, meshes, qpos, contact, FPS, clearance, PlantLockConfig(), IkConfig())
 
 
 def test_a_dragged_foot_rises_to_the_clearance_where_it_travels(

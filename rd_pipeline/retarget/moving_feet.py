@@ -14,7 +14,7 @@ import mujoco
 import numpy as np
 
 from rd_pipeline.retarget.config import IkConfig, MovingFootClearance, PlantLockConfig
-from rd_pipeline.retarget.plant_lock import bounded_step, clear_pairs
+from rd_pipeline.retarget.plant_lock import Turn, clear_pairs, reach
 from rd_pipeline.retarget.quality import FootMeshes
 from rd_pipeline.robots import Robot
 from rd_pipeline.robots.model import leg_joints
@@ -22,6 +22,7 @@ from rd_pipeline.robots.model import leg_joints
 
 def lift_moving_feet(
     robot: Robot,
+    meshes: FootMeshes,
     qpos: np.ndarray,
     contact: np.ndarray,
     fps: float,
@@ -29,14 +30,13 @@ def lift_moving_feet(
     lock: PlantLockConfig,
     ik: IkConfig,
 ) -> np.ndarray:
-    """`qpos` (T, nq) with every foot that is not planted (`contact` (T, 2)) and travels lifted
-    to `settings.clearance_m`. A lifted frame stays within the retarget range and within `ik`'s
+    """`qpos` (T, nq) with every foot (`meshes`) that is not planted (`contact` (T, 2)) and
+    travels lifted to `settings.clearance_m`. A lifted frame stays within the retarget range and within `ik`'s
     share of the velocity limits from both its neighbours; `lock` sets the leg's steps."""
     if settings.clearance_m == 0:
         return qpos
     model = robot.model
     data = mujoco.MjData(model)
-    meshes = FootMeshes.from_robot(robot)
     feet = [robot.body_ids[foot] for foot in robot.config.foot_bodies]
     names = robot.config.joint_names
     chains = [np.array([names.index(j) for j in leg_joints(robot, (foot,))]) for foot in robot.config.foot_bodies]
@@ -81,75 +81,14 @@ def _lifted(
     farther."""
     model = robot.model
     sole, xy = _sole_and_xy(model, data, q, leg.foot, leg.vertices)
-    goal = _Pose(data.xpos[leg.foot] + [0.0, 0.0, settings.clearance_m - sole], data.xquat[leg.foot].copy())
-    lifted = _moved(robot, data, q.copy(), goal, leg, bounds, settings.turn_weight_m, lock)
+    goal = data.xpos[leg.foot] + [0.0, 0.0, settings.clearance_m - sole]
+    turn = Turn(data.xquat[leg.foot].copy(), settings.turn_weight_m)
+    lifted = q.copy()
+    reach(robot, data, lifted, goal, leg.foot, leg.joints, bounds, lock, turn)
     new_sole, new_xy = _sole_and_xy(model, data, lifted, leg.foot, leg.vertices)
     if new_sole > sole and _travel(path, new_xy) <= _travel(path, xy) + settings.detour_m:
         return lifted
     return q
-
-
-@dataclass(frozen=True)
-class _Pose:
-    """Where a foot body should be, and how it should be turned (wxyz)."""
-
-    position: np.ndarray
-    quat: np.ndarray
-
-
-def _moved(
-    robot: Robot,
-    data: mujoco.MjData,
-    q: np.ndarray,
-    goal: _Pose,
-    leg: _Leg,
-    bounds: tuple[np.ndarray, np.ndarray],
-    turn_weight_m: float,
-    lock: PlantLockConfig,
-) -> np.ndarray:
-    """`q` after damped least-squares steps of `leg`'s joints towards `goal`, within `bounds`
-    (`lock`'s steps: a step that takes the foot farther from its goal is halved, then not taken)."""
-    model = robot.model
-    columns = robot.qpos_indices[leg.joints]
-    dofs = robot.dof_indices[leg.joints]
-    limits = (bounds[0][leg.joints], bounds[1][leg.joints])
-    jacobian = np.zeros((6, model.nv))
-    error = _pose_error(model, data, q, goal, leg.foot, turn_weight_m)
-    for _ in range(lock.iterations):
-        if np.linalg.norm(error) < lock.tolerance_m:
-            break
-        mujoco.mj_comPos(model, data)
-        mujoco.mj_jacBody(model, data, jacobian[:3], jacobian[3:], leg.foot)
-        jacobian[3:] *= turn_weight_m
-        trial = q.copy()
-        trial[columns] = bounded_step(jacobian[:, dofs], error, q[columns], limits, lock)
-        trial_error = _pose_error(model, data, trial, goal, leg.foot, turn_weight_m)
-        for _ in range(lock.step_halvings):
-            if np.linalg.norm(trial_error) < np.linalg.norm(error):
-                break
-            trial = 0.5 * (q + trial)
-            trial_error = _pose_error(model, data, trial, goal, leg.foot, turn_weight_m)
-        if np.linalg.norm(trial_error) >= np.linalg.norm(error):
-            break
-        q = trial
-        error = trial_error
-    return q
-
-
-def _pose_error(
-    model: mujoco.MjModel, data: mujoco.MjData, q: np.ndarray, goal: _Pose, foot: int, turn_weight_m: float
-) -> np.ndarray:
-    """(6,) the foot's position error (m) and turn error (world axes, rad times `turn_weight_m`)
-    from `goal` in `q` (which `data` then holds)."""
-    data.qpos[:] = q
-    mujoco.mj_kinematics(model, data)
-    current = np.empty(4)
-    mujoco.mju_negQuat(current, data.xquat[foot])
-    turn = np.empty(4)
-    mujoco.mju_mulQuat(turn, goal.quat, current)
-    rotation = np.empty(3)
-    mujoco.mju_quat2Vel(rotation, turn, 1.0)
-    return np.concatenate([goal.position - data.xpos[foot], rotation * turn_weight_m])
 
 
 def _travel(path: tuple[np.ndarray, np.ndarray], xy: np.ndarray) -> float:

@@ -72,7 +72,7 @@ def lock_plants(
             if hold is None:
                 continue
             goal = _goal(hold, free[t, k], release, settings.reach_m)
-            reached = _reach(robot, data, out[t], goal, feet[k], chains[k], (low, high), settings)
+            reached = reach(robot, data, out[t], goal, feet[k], chains[k], (low, high), settings)
             # Out of reach, the foot slides as far as it must and is held from there.
             if contact[t, k] and np.linalg.norm(reached - hold.point) > settings.slip_m:
                 hold.point = reached
@@ -110,7 +110,17 @@ def _goal(hold: _Hold, free: np.ndarray, release: int, reach_m: float) -> np.nda
     return free + pull * float(weight) * min(1.0, reach_m / max(length, 1e-9))
 
 
-def _reach(
+@dataclass(frozen=True)
+class Turn:
+    """How a foot should stay turned while `reach` moves it."""
+
+    quat: np.ndarray
+    """The orientation to keep (wxyz)."""
+    weight_m: float
+    """Metres of position error one radian of turn counts as."""
+
+
+def reach(
     robot: Robot,
     data: mujoco.MjData,
     q: np.ndarray,
@@ -119,46 +129,67 @@ def _reach(
     joints: np.ndarray,
     bounds: tuple[np.ndarray, np.ndarray],
     settings: PlantLockConfig,
+    turn: Turn | None = None,
 ) -> np.ndarray:
-    """Move the leg `joints` of `q` (in place) towards putting `foot` on `goal`, within `bounds`;
-    a step that leaves the foot farther from its goal is halved, then not taken. Returns where
-    the foot ends."""
+    """Move the leg `joints` of `q` (in place) towards putting `foot` on `goal`, and turned as
+    `turn` says when given, within `bounds`; a step that leaves the foot farther from its goal is
+    halved, then not taken. Returns where the foot ends."""
     model = robot.model
-    jacobian = np.zeros((3, model.nv))
+    jacobian = np.zeros((3 if turn is None else 6, model.nv))
     columns = robot.qpos_indices[joints]
     limits = (bounds[0][joints], bounds[1][joints])
-    best = _goal_distance(model, data, q, goal, foot)
+    error = _goal_error(model, data, q, goal, foot, turn)
+    best = float(np.linalg.norm(error))
     for _ in range(settings.iterations):
         if best < settings.tolerance_m:
             break
         mujoco.mj_comPos(model, data)
-        mujoco.mj_jacBody(model, data, jacobian, None, foot)
+        if turn is None:
+            mujoco.mj_jacBody(model, data, jacobian, None, foot)
+        else:
+            mujoco.mj_jacBody(model, data, jacobian[:3], jacobian[3:], foot)
+            jacobian[3:] *= turn.weight_m
         jac = jacobian[:, robot.dof_indices[joints]]
         trial = q.copy()
-        trial[columns] = bounded_step(jac, goal - data.xpos[foot], q[columns], limits, settings)
-        distance = _goal_distance(model, data, trial, goal, foot)
+        trial[columns] = _bounded_step(jac, error, q[columns], limits, settings)
+        trial_error = _goal_error(model, data, trial, goal, foot, turn)
+        distance = float(np.linalg.norm(trial_error))
         for _ in range(settings.step_halvings):
             if distance < best:
                 break
             trial = 0.5 * (q + trial)
-            distance = _goal_distance(model, data, trial, goal, foot)
+            trial_error = _goal_error(model, data, trial, goal, foot, turn)
+            distance = float(np.linalg.norm(trial_error))
         if distance >= best:
             break
         q[:] = trial
         best = distance
+        error = trial_error
     data.qpos[:] = q
     mujoco.mj_kinematics(model, data)
     return data.xpos[foot].copy()
 
 
-def _goal_distance(model: mujoco.MjModel, data: mujoco.MjData, q: np.ndarray, goal: np.ndarray, foot: int) -> float:
-    """The foot's distance from `goal` in `q` (which `data` then holds)."""
+def _goal_error(
+    model: mujoco.MjModel, data: mujoco.MjData, q: np.ndarray, goal: np.ndarray, foot: int, turn: Turn | None
+) -> np.ndarray:
+    """The foot's position error from `goal` in `q` (which `data` then holds), followed by its
+    turn error (world axes, radians times the weight) when `turn` is given."""
     data.qpos[:] = q
     mujoco.mj_kinematics(model, data)
-    return float(np.linalg.norm(goal - data.xpos[foot]))
+    error = goal - data.xpos[foot]
+    if turn is None:
+        return error
+    inverse = np.empty(4)
+    mujoco.mju_negQuat(inverse, data.xquat[foot])
+    difference = np.empty(4)
+    mujoco.mju_mulQuat(difference, turn.quat, inverse)
+    rotation = np.empty(3)
+    mujoco.mju_quat2Vel(rotation, difference, 1.0)
+    return np.concatenate([error, rotation * turn.weight_m])
 
 
-def bounded_step(
+def _bounded_step(
     jacobian: np.ndarray,
     error: np.ndarray,
     joints: np.ndarray,

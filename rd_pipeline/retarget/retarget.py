@@ -80,7 +80,7 @@ def retarget(
             refined = _pelvis_slack(ik, qpos, refined)
         qpos = lock_plants(robot, refined, targets.foot_contact, rate, params.plant_lock, settings)
         qpos = lift_moving_feet(
-            robot, qpos, targets.foot_contact, rate, params.moving_feet, params.plant_lock, settings
+            robot, feet, qpos, targets.foot_contact, rate, params.moving_feet, params.plant_lock, settings
         )
     if rate != fps:
         targets = build_targets(human, robot, fps, feet.vertices, params.contact, params.shape, params.body_contact)
