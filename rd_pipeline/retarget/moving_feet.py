@@ -14,10 +14,9 @@ import mujoco
 import numpy as np
 
 from rd_pipeline.retarget.config import IkConfig, MovingFootClearance, PlantLockConfig
-from rd_pipeline.retarget.plant_lock import Turn, clear_pairs, reach
+from rd_pipeline.retarget.plant_lock import Turn, clear_pairs, leg_chains, reach
 from rd_pipeline.retarget.quality import FootMeshes
 from rd_pipeline.robots import Robot
-from rd_pipeline.robots.model import leg_joints
 
 
 def lift_moving_feet(
@@ -31,16 +30,15 @@ def lift_moving_feet(
     ik: IkConfig,
 ) -> np.ndarray:
     """`qpos` (T, nq) with every foot (`meshes`) that is not planted (`contact` (T, 2)) and
-    travels lifted to `settings.clearance_m`. A lifted frame stays within the retarget range and within `ik`'s
-    share of the velocity limits from both its neighbours; `lock` sets the leg's steps."""
+    travels lifted to `settings.clearance_m`. A lifted frame stays within the retarget range and
+    within `ik`'s share of the velocity limits from both its neighbours; `lock` sets the leg's
+    steps."""
     if settings.clearance_m == 0:
         return qpos
     model = robot.model
     data = mujoco.MjData(model)
     feet = [robot.body_ids[foot] for foot in robot.config.foot_bodies]
-    names = robot.config.joint_names
-    chains = [np.array([names.index(j) for j in leg_joints(robot, (foot,))]) for foot in robot.config.foot_bodies]
-    legs = [_Leg(foot, chain, vertices) for foot, chain, vertices in zip(feet, chains, meshes.vertices)]
+    legs = [_Leg(foot, chain, vertices) for foot, chain, vertices in zip(feet, leg_chains(robot), meshes.vertices)]
     max_step = robot.config.velocity_limit / fps * ik.velocity_margin
     out = qpos.copy()
     # A lift that turns the foot a little moves it sideways, and a neighbouring frame on the

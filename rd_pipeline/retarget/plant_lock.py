@@ -48,8 +48,7 @@ def lock_plants(
     model = robot.model
     data = mujoco.MjData(model)
     feet = [robot.body_ids[foot] for foot in robot.config.foot_bodies]
-    names = robot.config.joint_names
-    chains = [np.array([names.index(j) for j in leg_joints(robot, (foot,))]) for foot in robot.config.foot_bodies]
+    chains = leg_chains(robot)
     free = _foot_positions(model, data, qpos, feet)
     max_step = robot.config.velocity_limit / fps * ik.velocity_margin
     release = max(1, round(settings.release_s * fps))
@@ -77,6 +76,12 @@ def lock_plants(
             if contact[t, k] and np.linalg.norm(reached - hold.point) > settings.slip_m:
                 hold.point = reached
     return clear_pairs(robot, qpos, out, ik.pair_depth_limit_m)
+
+
+def leg_chains(robot: Robot) -> list[np.ndarray]:
+    """Each foot's leg joints, as indices into the config's joints (left, right)."""
+    names = robot.config.joint_names
+    return [np.array([names.index(j) for j in leg_joints(robot, (foot,))]) for foot in robot.config.foot_bodies]
 
 
 def clear_pairs(robot: Robot, free: np.ndarray, held: np.ndarray, depth_m: float) -> np.ndarray:
