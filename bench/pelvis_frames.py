@@ -35,6 +35,7 @@ from bench.retarget import retarget_and_score
 from bench.retarget_variants import BARS, FLOOR_CUT, _wider_ranges, clips
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.lafan_joints import FEET
+from rd_pipeline.retarget.quality import quality_series
 from rd_pipeline.retarget.retarget import RetargetResult
 from rd_pipeline.retarget.targets import RetargetTargets, resample_human
 from rd_pipeline.robots import Robot, load_robot
@@ -76,14 +77,15 @@ def main() -> None:
 
 
 def _report(robot: Robot, name: str) -> dict:
-    take, span = name.rsplit(" ", 2)[0], name.rsplit(" ", 2)[1]
+    take, span, _ = name.rsplit(" ", 2)
     cuts = dict(clips(take, "floor_cut"))
     if name not in cuts:
         raise SystemExit(f"--clips {name!r}: not a floor cut of {take} (its cuts: {', '.join(cuts) or 'none'})")
     clip = cuts[name]
     own_result, _, _ = retarget_and_score(clip, robot)
     own = _scored(robot, own_result)
-    wider = _scored(_wider_ranges(robot), retarget_and_score(clip, _wider_ranges(robot))[0])
+    wider_robot = _wider_ranges(robot)
+    wider = _scored(wider_robot, retarget_and_score(clip, wider_robot)[0])
     on_back = planted_on_back(clip, own_result.targets)
     stretches = [
         _stretch(robot, own, wider, on_back, frames, own_result.reference.fps) for frames in _over_bar(own, own_result)
@@ -108,13 +110,12 @@ def _report(robot: Robot, name: str) -> dict:
 
 
 def _scored(robot: Robot, result: RetargetResult) -> _Scored:
-    reference = result.reference
-    root = reference.body_names.index(robot.config.root_body)
-    difference = reference.body_pos_w[:, root, 2] - result.targets.human_pelvis[:, 2]
+    human_pelvis = result.targets.human_pelvis
+    deviation = quality_series(robot, result.reference, human_pelvis=human_pelvis)["pelvis_height_dev_m"]
     lower, upper = robot.retarget_range.T
-    joints = reference.joint_pos
+    joints = result.reference.joint_pos
     at_bound = (joints - lower < BOUND_RAD) | (upper - joints < BOUND_RAD)
-    return _Scored(difference - np.median(difference), result.targets.human_pelvis[:, 2], at_bound)
+    return _Scored(deviation, human_pelvis[:, 2], at_bound)
 
 
 def planted_on_back(clip: HumanMotion, targets: RetargetTargets) -> np.ndarray:
