@@ -33,6 +33,7 @@ import numpy as np
 
 from bench.retarget import retarget_and_score
 from bench.retarget_variants import BARS, FLOOR_CUT, _wider_ranges, clips
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.lafan_joints import FEET
 from rd_pipeline.retarget.quality import quality_series
@@ -69,15 +70,21 @@ def main() -> None:
     parser.add_argument("--clips", nargs="+", default=["ground2_subject2 145-165 s"])
     parser.add_argument("--out", type=Path, default=Path("bench/results/pelvis_frames_g1"))
     args = parser.parse_args()
-    robot = load_robot(args.robot)
-    reports = [_report(robot, name) for name in args.clips]
+    try:
+        robot = load_robot(args.robot)
+        reports = [_report(robot, name) for name in args.clips]
+    except PipelineError as exc:
+        raise SystemExit(f"pelvis_frames: {exc}") from None
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".json").write_text(json.dumps(reports, indent=1) + "\n")
     args.out.with_suffix(".md").write_text(_markdown(args.robot, reports))
 
 
 def _report(robot: Robot, name: str) -> dict:
-    take, span, _ = name.rsplit(" ", 2)
+    parts = name.rsplit(" ", 2)
+    if len(parts) != 3:
+        raise SystemExit(f"--clips {name!r}: give a floor cut as '<take> <start>-<end> s'")
+    take, span, _ = parts
     cuts = dict(clips(take, "floor_cut"))
     if name not in cuts:
         raise SystemExit(f"--clips {name!r}: not a floor cut of {take} (its cuts: {', '.join(cuts) or 'none'})")

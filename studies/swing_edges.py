@@ -23,6 +23,7 @@ import numpy as np
 
 from bench.retarget import retarget_and_score
 from bench.retarget_variants import clips
+from rd_pipeline.errors import PipelineError
 from rd_pipeline.retarget.quality import QualityThresholds, sole_heights_and_speeds
 from rd_pipeline.robots import load_robot
 
@@ -35,8 +36,11 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--out", type=Path, default=Path("docs/images/floor_skate_swing_edges_h1.png"))
     args = parser.parse_args()
-    robot = load_robot(args.robot)
-    cuts = dict(clips(args.take, "floor_cut"))
+    try:
+        robot = load_robot(args.robot)
+        cuts = dict(clips(args.take, "floor_cut"))
+    except PipelineError as exc:
+        raise SystemExit(f"swing_edges: {exc}") from None
     if args.clip not in cuts:
         raise SystemExit(
             f"--clip {args.clip!r}: not a floor cut of {args.take} (its cuts: {', '.join(cuts) or 'none'})"
