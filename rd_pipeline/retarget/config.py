@@ -44,9 +44,15 @@ class TargetShaping:
     """A planted human foot tilted more than this (kneeling, heel up) takes on the human's tilt, fully at twice it."""
     plant_drift: PlantDrift = PlantDrift()
     """When a long plant is cut by a short swing (a shuffle step the contact label missed)."""
+    standing_hips_fraction: float = 0.8
+    """The human stands while the hips are higher than this fraction of the leg length (hip to
+    knee to ankle). How the human foot lies on its sole is learnt from the plants made standing:
+    kneeling, a planted foot may rest on its back, and a clip that opens on the floor would teach
+    the robot to lay its sole flat where the human's faces up."""
 
     def __post_init__(self) -> None:
         require_positive(self, "swing_clearance_m")
+        require_positive(self, "standing_hips_fraction")
 
 
 @dataclass(frozen=True)

@@ -48,6 +48,7 @@ def plant_foot(
     pelvis_yaw: np.ndarray,
     yaw_range: tuple[float, float],
     human_path: np.ndarray,
+    standing: np.ndarray,
     shape: TargetShaping,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Foot targets: fixed and flat while planted; in swing, the human path bent to meet the plants.
@@ -59,7 +60,8 @@ def plant_foot(
     step too low and slow to lift the contact label): a short swing carries the foot to a new plant.
 
     Swing orientation follows the human foot joint (its toe line is useless as a heading when the
-    foot points down), through the constant offset that makes it flat and aligned during plants.
+    foot points down), through the constant offset that makes it flat and aligned during the plants
+    made `standing` ((T,) bool).
     """
     n = free.shape[0]
     drift = shape.plant_drift
@@ -70,7 +72,7 @@ def plant_foot(
     plants = _plants(contact, free, sole)
     heading = _planted_heading(forward, plants, pelvis_yaw, yaw_range)
     flat = Rotation.from_matrix(yaw_pitch_frame(heading, np.zeros(n)))
-    swinging = _swing_orientation(human_rotation, flat, contact)
+    swinging = _swing_orientation(human_rotation, flat, contact, standing)
     flat = _keep_planted_tilt(flat, swinging, plants, shape.planted_tilt_rad)
     position = free.copy()
     for plant in plants:
@@ -119,10 +121,20 @@ def _planted_heading(
     return heading
 
 
-def _swing_orientation(human_rotation: np.ndarray, flat: Rotation, contact: np.ndarray) -> Rotation:
-    """The human foot turned by the one offset that best lays it on `flat` over the plants."""
+def _swing_orientation(
+    human_rotation: np.ndarray,
+    flat: Rotation,
+    contact: np.ndarray,
+    standing: np.ndarray,
+) -> Rotation:
+    """The human foot turned by the one offset that best lays it on `flat` over the plants made
+    standing (kneeling, a planted foot may rest on its back); without any, over all plants, and
+    without plants, over the whole clip."""
     human = Rotation.from_matrix(human_rotation)
-    calibration = contact if contact.any() else np.ones(len(contact), dtype=bool)
+    calibration = contact & standing
+    for fallback in (contact, np.ones_like(contact)):
+        if not calibration.any():
+            calibration = fallback
     offset = (human[calibration].inv() * flat[calibration]).mean()
     return human * offset
 

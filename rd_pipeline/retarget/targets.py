@@ -110,6 +110,10 @@ def robot_rest_rotation(robot: Robot, body: str) -> np.ndarray:
     return data.xmat[robot.body_ids[body]].reshape(3, 3).copy()
 
 
+_LEG = ((HIPS_LR[0], KNEES[0]), (KNEES[0], FEET[0]))
+"""The left leg, hip to knee to ankle: the length robot and human are scaled by."""
+
+
 @dataclass(frozen=True)
 class _Clip:
     """The resampled human and the robot it is mapped onto: what the shaping steps read."""
@@ -128,6 +132,8 @@ class _Clip:
     """Human joint -> (3,) its robot body's position in the rest pose."""
     root_scale: float
     """Human-to-robot scale of the root path (the leg-length ratio)."""
+    standing: np.ndarray
+    """(T,) the human stands: hips above a fraction of the leg length (`TargetShaping.standing_hips_fraction`)."""
 
     def human(self, joint: str) -> np.ndarray:
         """(T, 3) the human joint's path."""
@@ -156,7 +162,8 @@ def build_targets(
     bodies = list(config.retarget_map.keys())
     rest = dict(zip(joints, robot_rest_positions(robot, bodies)))
     root_scale = _root_scale(human_pos, index, rest)
-    clip = _Clip(human_pos, human_rot, index, fps, robot, body_for, rest, root_scale)
+    standing = _standing(human_pos, index, shape.standing_hips_fraction)
+    clip = _Clip(human_pos, human_rot, index, fps, robot, body_for, rest, root_scale, standing)
     orientations = _orientations(human_pos, index, robot, body_for, rest)
     targets = _limb_chain(clip, human, joints, orientations)
     _spread_feet(targets, rest, orientations[body_for[PELVIS]], fps, shape)
@@ -206,10 +213,20 @@ def _body_for_joint(robot: Robot, human: HumanMotion) -> dict[str, str]:
 
 def _root_scale(pos: np.ndarray, index: dict[str, int], rest: dict[str, np.ndarray]) -> float:
     """Robot over human leg length (hip to knee to ankle, left side): the scale of the root path."""
-    leg = ((HIPS_LR[0], KNEES[0]), (KNEES[0], FEET[0]))
-    leg_human = sum(_median_length(pos, index, a, b) for a, b in leg)
-    leg_robot = sum(np.linalg.norm(rest[a] - rest[b]) for a, b in leg)
-    return float(leg_robot / leg_human)
+    leg_robot = sum(np.linalg.norm(rest[a] - rest[b]) for a, b in _LEG)
+    return float(leg_robot / _human_leg_length(pos, index))
+
+
+def _human_leg_length(pos: np.ndarray, index: dict[str, int]) -> float:
+    """Hip to knee to ankle, left side, median over the clip (bone lengths do not change)."""
+    return sum(_median_length(pos, index, a, b) for a, b in _LEG)
+
+
+def _standing(pos: np.ndarray, index: dict[str, int], hips_fraction: float) -> np.ndarray:
+    """(T,) the human stands: hips higher than `hips_fraction` of the leg length. Measured
+    against the skeleton, not the clip, so a clip that opens on the floor reads the same."""
+    hips = pos[:, index[PELVIS], 2]
+    return hips > hips_fraction * _human_leg_length(pos, index)
 
 
 def _limb_chain(
@@ -302,6 +319,7 @@ def _plant_feet(
             pelvis_yaw,
             leg_yaw_range(clip.robot, clip.body_for[foot]),
             0.5 * (clip.human(foot) + clip.human(toe)) * clip.root_scale,
+            clip.standing,
             shape,
         )
         targets[foot] = position
