@@ -9,7 +9,7 @@ the pelvis ruler of `retarget_quality` (pelvis height against the scaled human's
 median offset removed; bar 0.10 m). Frames over the bar are grouped into stretches, and each says:
 
 - how many of its frames the wider-ranges copy brings within the bar (the ranges explain those);
-- how many have a human foot that the targets plant flat while its sole faces more than 90 degrees
+- how many have a human foot the targets plant while its sole faces more than 90 degrees
   away from the floor (the foot rests on its back: kneeling, lying, crawling; the sole's direction
   is the one that points up while the human stands on that foot);
 - which leg joints sit at a bound of their range in most of its frames.
