@@ -31,13 +31,13 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
-from bench.retarget import retarget_and_score
-from bench.retarget_variants import BARS, FLOOR_CUT, _wider_ranges, clips
+from bench.retarget_variants import BARS, FLOOR_CUT, _wider_ranges, clips, floor_cut
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
+from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.retarget.lafan_joints import FEET
 from rd_pipeline.retarget.quality import quality_series
-from rd_pipeline.retarget.retarget import RetargetResult
+from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.retarget.targets import RetargetTargets, resample_human
 from rd_pipeline.robots import Robot, load_robot
 
@@ -85,14 +85,11 @@ def _report(robot: Robot, name: str) -> dict:
     if len(parts) != 3:
         raise SystemExit(f"--clips {name!r}: give a floor cut as '<take> <start>-<end> s'")
     take, span, _ = parts
-    cuts = dict(clips(take, "floor_cut"))
-    if name not in cuts:
-        raise SystemExit(f"--clips {name!r}: not a floor cut of {take} (its cuts: {', '.join(cuts) or 'none'})")
-    clip = cuts[name]
-    own_result, _, _ = retarget_and_score(clip, robot)
+    clip = floor_cut(take, name)
+    own_result = retarget(clip, robot, RetargetConfig())
     own = _scored(robot, own_result)
     wider_robot = _wider_ranges(robot)
-    wider = _scored(wider_robot, retarget_and_score(clip, wider_robot)[0])
+    wider = _scored(wider_robot, retarget(clip, wider_robot, RetargetConfig()))
     on_back = planted_on_back(clip, own_result.targets)
     stretches = [
         _stretch(robot, own, wider, on_back, frames, own_result.reference.fps) for frames in _over_bar(own, own_result)
@@ -173,7 +170,7 @@ def _stretch(robot: Robot, own: _Scored, wider: _Scored, on_back: np.ndarray, fr
 
 def _within_whole_take(robot: Robot, take: str, start_s: float, frames: int, fps: float) -> float:
     """The pelvis ruler over the cut's seconds inside the whole take, retargeted from its start."""
-    result, _, _ = retarget_and_score(clips(take, "plain")[0][1], robot)
+    result = retarget(clips(take, "plain")[0][1], robot, RetargetConfig())
     scored = _scored(robot, result)
     first = round(start_s * fps)
     window = scored.deviation[first : first + frames]

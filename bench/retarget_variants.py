@@ -127,6 +127,15 @@ def clips(take: str, variant: str) -> list[tuple[str, HumanMotion]]:
     return [(f"{take} {start:.0f}-{start + FLOOR_CUT['length_s']:.0f} s", clip) for start, clip in cuts]
 
 
+def floor_cut(take: str, name: str) -> HumanMotion:
+    """The floor cut of `take` that `clips` names `name`; one it does not make stops in one line
+    naming the cuts there are."""
+    cuts = dict(clips(take, "floor_cut"))
+    if name not in cuts:
+        raise PipelineError(f"'{name}' is not a floor cut of {take} (its cuts: {', '.join(cuts) or 'none'})")
+    return cuts[name]
+
+
 def _rows(robot_name: str, take: str, variant: str, params: RetargetConfig) -> list[dict]:
     robot = load_robot(robot_name)
     rows = []

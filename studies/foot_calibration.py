@@ -23,12 +23,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from bench.retarget import retarget_and_score
-from bench.retarget_variants import BARS, clips
+from bench.retarget_variants import BARS, clips, floor_cut
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.config import RetargetConfig, TargetShaping
 from rd_pipeline.retarget.quality import FootMeshes, quality_series
+from rd_pipeline.retarget.retarget import retarget
 from rd_pipeline.retarget.targets import RetargetTargets, build_targets
 from rd_pipeline.robots import Robot, load_robot
 
@@ -65,17 +65,12 @@ def _targets(robot: Robot, clip: HumanMotion, shape: TargetShaping) -> RetargetT
 
 
 def _cut(take: str, seconds: tuple[int, int]) -> HumanMotion:
-    cuts = dict(clips(take, "floor_cut"))
-    name = f"{take} {seconds[0]}-{seconds[1]} s"
-    if name not in cuts:
-        raise PipelineError(f"'{name}' is not a floor cut of {take} (its cuts: {', '.join(cuts) or 'none'})")
-    return cuts[name]
+    return floor_cut(take, f"{take} {seconds[0]}-{seconds[1]} s")
 
 
 def _pelvis_deviation(robot: Robot, clip: HumanMotion, shape: TargetShaping) -> np.ndarray:
     """(T,) the pelvis ruler's per-frame deviation (m) of the clip retargeted with `shape`."""
-    params = dataclasses.replace(RetargetConfig(), shape=shape)
-    result, _, _ = retarget_and_score(clip, robot, params)
+    result = retarget(clip, robot, dataclasses.replace(RetargetConfig(), shape=shape))
     series = quality_series(robot, result.reference, human_pelvis=result.targets.human_pelvis)
     return series["pelvis_height_dev_m"]
 

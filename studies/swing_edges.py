@@ -22,7 +22,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from bench.retarget import retarget_and_score
-from bench.retarget_variants import clips
+from bench.retarget_variants import floor_cut
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.retarget.quality import QualityThresholds, sole_heights_and_speeds
 from rd_pipeline.robots import load_robot
@@ -38,14 +38,9 @@ def main() -> None:
     args = parser.parse_args()
     try:
         robot = load_robot(args.robot)
-        cuts = dict(clips(args.take, "floor_cut"))
+        clip = floor_cut(args.take, args.clip)
     except PipelineError as exc:
         raise SystemExit(f"swing_edges: {exc}") from None
-    if args.clip not in cuts:
-        raise SystemExit(
-            f"--clip {args.clip!r}: not a floor cut of {args.take} (its cuts: {', '.join(cuts) or 'none'})"
-        )
-    clip = cuts[args.clip]
     result, quality, _ = retarget_and_score(clip, robot)
     reference = result.reference
     targets = result.targets
