@@ -9,10 +9,18 @@ the pelvis ruler of `retarget_quality` (pelvis height against the scaled human's
 median offset removed; bar 0.10 m). Frames over the bar are grouped into stretches, and each says:
 
 - how many of its frames the wider-ranges copy brings within the bar (the ranges explain those);
+- of the frames the ranges leave with the robot above the human, how many have a robot body
+  other than the feet resting on the floor (sitting on its hip motors: its build stops it going
+  lower there, whatever the ranges), and which body;
 - how many have a human foot the targets plant while its sole faces more than 90 degrees
   away from the floor (the foot rests on its back: kneeling, lying, crawling; the sole's direction
-  is the one that points up while the human stands on that foot);
+  is the one that points up while the human stands on that foot, over the whole take);
+- how many the IK has lost: the keypoint ruler of `retarget_quality` calls them diverged (the
+  robot stuck in another posture, e.g. still lying while the human sits up);
 - which leg joints sit at a bound of their range in most of its frames.
+
+Each frame over the bar gets the first of these causes that holds (ranges, body, foot on its
+back, lost); the ones with none are left.
 
 The same seconds are then scored inside the whole take, retargeted from its start, with the same
 ruler over those seconds. `<out>.md` is the table, `<out>.json` the numbers.
@@ -36,18 +44,21 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.retarget.lafan_joints import FEET
-from rd_pipeline.retarget.quality import quality_series
+from rd_pipeline.retarget.quality import QualityThresholds, diverged, quality_series
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.retarget.targets import RetargetTargets, resample_human
 from rd_pipeline.robots import Robot, load_robot
+from rd_pipeline.robots.hulls import BodyHulls
 
 BAR_M = BARS["pelvis_height_dev_p95_m"]
 GAP_S = 0.2
 """Stretches over the bar closer than this merge into one."""
 BACK_DEG = 90.0
 """A planted human foot whose sole faces farther than this from the floor rests on its back."""
-STANDING = 0.8
-"""The human stands while the hips are above this fraction of their highest in the clip."""
+RESTING_M = 0.01
+"""A robot body whose lowest point is this close to the floor rests on it."""
+CAUSES = ("ranges", "body_rests", "foot_on_back", "lost", "left")
+"""Why a frame is over the bar, in the order they are tried (see the module's docstring)."""
 BOUND_RAD = 0.02
 """A joint this close to a bound of its range sits at the bound."""
 
@@ -62,6 +73,11 @@ class _Scored:
     """(T,) the scaled human's hips height (m)."""
     at_bound: np.ndarray
     """(T, J) bool: joint at a bound of the robot's range."""
+    resting_body: np.ndarray
+    """(T,) the robot body other than the feet lowest above the floor where it is within
+    `RESTING_M` of it, else an empty string."""
+    lost: np.ndarray
+    """(T,) bool: the keypoint ruler calls the frame diverged."""
 
 
 def main() -> None:
@@ -90,66 +106,99 @@ def _report(robot: Robot, name: str) -> dict:
     own = _scored(robot, own_result)
     wider_robot = _wider_ranges(robot)
     wider = _scored(wider_robot, retarget(clip, wider_robot, RetargetConfig()))
-    on_back = planted_on_back(clip, own_result.targets)
-    stretches = [
-        _stretch(robot, own, wider, on_back, frames, own_result.reference.fps) for frames in _over_bar(own, own_result)
-    ]
-    start_s = float(span.split("-")[0])
-    whole = _within_whole_take(robot, take, start_s, len(own.deviation), own_result.reference.fps)
+    whole_human = clips(take, "plain")[0][1]
+    whole_result = retarget(whole_human, robot, RetargetConfig())
+    soles = sole_directions(whole_human, whole_result.targets)
+    on_back = planted_on_back(clip, own_result.targets, soles)
+    fps = own_result.reference.fps
     over = np.abs(own.deviation) > BAR_M
-    explained = over & (np.abs(wider.deviation) <= BAR_M)
+    cause = _causes(own, wider, on_back)
+    stretches = [_stretch(robot, own, cause, frames, fps) for frames in _over_bar(own, fps)]
+    start_s = float(span.split("-")[0])
+    whole = _within_whole_take(robot, whole_result, start_s, len(own.deviation))
     return {
         "clip": name,
         "frames": len(over),
         "pelvis_p95_m": _p95(own.deviation),
         "wider_ranges_p95_m": _p95(wider.deviation),
         "frames_over": int(over.sum()),
-        "over_ranges_explain": int(explained.sum()),
-        "over_foot_on_back": int((over & on_back).sum()),
-        "over_unexplained_foot_on_back": int((over & ~explained & on_back).sum()),
+        **{f"over_{key}": int((over & (cause == key)).sum()) for key in CAUSES},
         "cut_frames_foot_on_back": int(on_back.sum()),
         "whole_take_same_seconds_p95_m": whole,
         "stretches": stretches,
     }
 
 
+def _causes(own: _Scored, wider: _Scored, on_back: np.ndarray) -> np.ndarray:
+    """(T,) per frame, the first of `CAUSES` that holds ("left" where none does)."""
+    holds = {
+        "ranges": np.abs(wider.deviation) <= BAR_M,
+        "body_rests": (own.deviation > 0) & (own.resting_body != ""),
+        "foot_on_back": on_back,
+        "lost": own.lost,
+    }
+    cause = np.full(len(on_back), "left", dtype=object)
+    for key in reversed(CAUSES[:-1]):
+        cause[holds[key]] = key
+    return cause
+
+
 def _scored(robot: Robot, result: RetargetResult) -> _Scored:
     human_pelvis = result.targets.human_pelvis
-    deviation = quality_series(robot, result.reference, human_pelvis=human_pelvis)["pelvis_height_dev_m"]
+    reference = result.reference
+    targets = result.targets
+    series = quality_series(robot, reference, targets.positions, targets.bodies, human_pelvis)
+    deviation = series["pelvis_height_dev_m"]
     lower, upper = robot.retarget_range.T
-    joints = result.reference.joint_pos
+    joints = reference.joint_pos
     at_bound = (joints - lower < BOUND_RAD) | (upper - joints < BOUND_RAD)
-    return _Scored(deviation, human_pelvis[:, 2], at_bound)
+    hulls = BodyHulls.from_robot(robot).without(robot.config.foot_bodies)
+    lowest = hulls.lowest_z(reference.body_pos_w, reference.body_quat_w, reference.body_names)
+    names = np.array(hulls.body_names, dtype=object)
+    resting = np.where(lowest.min(axis=1) < RESTING_M, names[lowest.argmin(axis=1)], "")
+    lost = diverged(series["keypoint_error_m"], QualityThresholds())
+    return _Scored(deviation, human_pelvis[:, 2], at_bound, resting, lost)
 
 
-def planted_on_back(clip: HumanMotion, targets: RetargetTargets) -> np.ndarray:
-    """(T,) bool: the targets plant a human foot whose sole faces away from the floor by more than
-    `BACK_DEG`. A foot's sole direction (in its own frame) is the one that points up, on
-    average, over the frames the targets plant it while the human stands."""
+def sole_directions(human: HumanMotion, targets: RetargetTargets) -> np.ndarray:
+    """(2, 3) the left and right sole's direction in the human foot joint's frame: the axis that
+    points up, on average, over the frames `targets` (of `human`) plant that foot while the human
+    stands. Read on a whole take: a floor cut may never stand."""
+    _, rotations, names = resample_human(human, targets.fps)
+    soles = []
+    for side, foot in enumerate(FEET):
+        flat = targets.foot_contact[:, side].astype(bool) & targets.human_standing
+        if not flat.any():
+            raise PipelineError(f"the human never stands on the {foot} foot: no sole direction to learn")
+        turns = rotations[: len(flat), names.index(foot)][flat]
+        up = (turns.transpose(0, 2, 1) @ np.array([0.0, 0.0, 1.0])).mean(axis=0)
+        soles.append(up / np.linalg.norm(up))
+    return np.array(soles)
+
+
+def planted_on_back(clip: HumanMotion, targets: RetargetTargets, soles: np.ndarray) -> np.ndarray:
+    """(T,) bool: the targets plant a human foot whose sole (`soles`, from `sole_directions`)
+    faces away from the floor by more than `BACK_DEG`."""
     _, rotations, names = resample_human(clip, targets.fps)
     planted = targets.foot_contact.astype(bool)
-    hips = targets.human_pelvis[:, 2]
-    standing = hips >= STANDING * hips.max()
     on_back = np.zeros(len(planted), dtype=bool)
     for side, foot in enumerate(FEET):
         turns = rotations[: len(planted), names.index(foot)]
-        flat = planted[:, side] & standing
-        normal = (turns[flat].transpose(0, 2, 1) @ np.array([0.0, 0.0, 1.0])).mean(axis=0)
-        facing_up = (turns @ (normal / np.linalg.norm(normal)))[:, 2]
+        facing_up = (turns @ soles[side])[:, 2]
         on_back |= planted[:, side] & (facing_up < np.cos(np.radians(BACK_DEG)))
     return on_back
 
 
-def _over_bar(own: _Scored, result: RetargetResult) -> list[np.ndarray]:
+def _over_bar(own: _Scored, fps: float) -> list[np.ndarray]:
     """Frame indices of each stretch over the bar."""
     over = np.flatnonzero(np.abs(own.deviation) > BAR_M)
     if len(over) == 0:
         return []
-    gap = max(1, round(GAP_S * result.reference.fps))
+    gap = max(1, round(GAP_S * fps))
     return np.split(over, np.flatnonzero(np.diff(over) > gap) + 1)
 
 
-def _stretch(robot: Robot, own: _Scored, wider: _Scored, on_back: np.ndarray, frames: np.ndarray, fps: float) -> dict:
+def _stretch(robot: Robot, own: _Scored, cause: np.ndarray, frames: np.ndarray, fps: float) -> dict:
     held = own.at_bound[frames].mean(axis=0)
     names = robot.config.joint_names
     legs = [
@@ -157,22 +206,23 @@ def _stretch(robot: Robot, own: _Scored, wider: _Scored, on_back: np.ndarray, fr
         for j in np.argsort(-held)
         if held[j] > 0.5 and ("hip" in names[j] or "knee" in names[j] or "ankle" in names[j])
     ]
+    rests = own.resting_body[frames][cause[frames] == "body_rests"]
+    bodies, counts = np.unique(rests.astype(str), return_counts=True)
     return {
         "seconds": [round(frames[0] / fps, 2), round((frames[-1] + 1) / fps, 2)],
         "frames": len(frames),
         "human_hips_m": round(float(own.hips[frames].mean()), 3),
         "deviation_m": round(float(own.deviation[frames].mean()), 3),
-        "wider_ranges_within_bar": int((np.abs(wider.deviation[frames]) <= BAR_M).sum()),
-        "foot_on_back": int(on_back[frames].sum()),
+        **{key: int((cause[frames] == key).sum()) for key in CAUSES},
+        "resting_on": [str(b) for b in bodies[np.argsort(-counts)]],
         "legs_at_bound": legs,
     }
 
 
-def _within_whole_take(robot: Robot, take: str, start_s: float, frames: int, fps: float) -> float:
+def _within_whole_take(robot: Robot, result: RetargetResult, start_s: float, frames: int) -> float:
     """The pelvis ruler over the cut's seconds inside the whole take, retargeted from its start."""
-    result = retarget(clips(take, "plain")[0][1], robot, RetargetConfig())
     scored = _scored(robot, result)
-    first = round(start_s * fps)
+    first = round(start_s * result.reference.fps)
     window = scored.deviation[first : first + frames]
     return _p95(window - np.median(window))
 
@@ -182,26 +232,36 @@ def _p95(deviation: np.ndarray) -> float:
 
 
 def _markdown(robot: str, reports: list[dict]) -> str:
-    lines = [f"# {robot}: pelvis frames over {BAR_M:g} m on floor cuts ({FLOOR_CUT['length_s']:g} s), and why", ""]
+    lines = [
+        f"# {robot}: pelvis frames over {BAR_M:g} m on floor cuts ({FLOOR_CUT['length_s']:g} s), and why",
+        "",
+        "Each frame over the bar counts under the first cause that holds: the wider ranges bring it within "
+        "the bar; the robot is above the human with a body other than the feet resting on the floor; a "
+        "human foot is planted on its back; the keypoint ruler calls the frame diverged (lost); none (left).",
+        "",
+    ]
     for report in reports:
         lines += [
             f"## {report['clip']}",
             "",
             f"Pelvis p95 {report['pelvis_p95_m']:.3f} m (wider ranges {report['wider_ranges_p95_m']:.3f}; the same seconds "
             f"within the whole take {report['whole_take_same_seconds_p95_m']:.3f}). {report['frames_over']} of "
-            f"{report['frames']} frames over the bar: the wider ranges bring {report['over_ranges_explain']} within it; "
-            f"{report['over_foot_on_back']} have a human foot planted on its back "
-            f"({report['over_unexplained_foot_on_back']} of those the ranges leave; "
-            f"{report['cut_frames_foot_on_back']} such frames in the cut).",
+            f"{report['frames']} frames over the bar: ranges {report['over_ranges']}, robot resting on its body "
+            f"{report['over_body_rests']}, foot on its back {report['over_foot_on_back']}, lost {report['over_lost']}, "
+            f"left {report['over_left']} "
+            f"({report['cut_frames_foot_on_back']} frames of the cut have a foot planted on its back).",
             "",
-            "| seconds | frames | human hips m | robot - human m | wider ranges within bar | foot on its back | legs at a bound |",
-            "|---|---|---|---|---|---|---|",
+            "| seconds | frames | human hips m | robot - human m | ranges | body rests (on) | foot on its back | lost "
+            "| left | legs at a bound |",
+            "|---|---|---|---|---|---|---|---|---|---|",
         ]
         for stretch in report["stretches"]:
             start, end = stretch["seconds"]
+            on = ", ".join(stretch["resting_on"])
             lines.append(
                 f"| {start:.2f}-{end:.2f} | {stretch['frames']} | {stretch['human_hips_m']:.3f} | "
-                f"{stretch['deviation_m']:+.3f} | {stretch['wider_ranges_within_bar']} | {stretch['foot_on_back']} | "
+                f"{stretch['deviation_m']:+.3f} | {stretch['ranges']} | {stretch['body_rests']}"
+                f"{f' ({on})' if on else ''} | {stretch['foot_on_back']} | {stretch['lost']} | {stretch['left']} | "
                 f"{', '.join(stretch['legs_at_bound']) or '-'} |"
             )
         lines.append("")

@@ -15,8 +15,9 @@ Each row is scored by `retarget_quality` against the scaled human, with the issu
 15 mm/s, penetration 10 mm, no joint-limit, velocity-limit or self-collision frame, pelvis height
 deviation p95 0.10 m. Where the pelvis misses its bar, the same clip is retargeted once more on a
 copy of the robot with wider ranges (H1 and H1-2: G1's hip and knee ranges; G1: every range
-0.5 rad wider, `bench/retarget_ranges.py`): if the copy meets the bar, the robot's ranges explain
-the miss. Rows go to `<out>.jsonl` as they finish; `<out>.md` is the table.
+0.5 rad wider, `bench/retarget_ranges.py`). The frames the copy brings within the bar are the
+ones the ranges explain; if the robot's p95 meets the bar with those frames read as the copy
+reads them, the ranges explain the miss. Rows go to `<out>.jsonl` as they finish; `<out>.md` is the table.
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import numpy as np
+
 from bench.motion_variants import floor_cuts, mirrored, played_at
 from bench.retarget import resume_log, retarget_and_score, shared_takes
 from bench.retarget_ranges import widened_ranges, with_g1_leg_ranges
@@ -39,6 +42,8 @@ from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.retarget.config import RetargetConfig
+from rd_pipeline.retarget.quality import quality_series
+from rd_pipeline.retarget.retarget import RetargetResult
 from rd_pipeline.robots import Robot, load_robot
 
 VARIANTS = ("plain", "mirror", "tempo_1.25", "tempo_0.8", "floor_cut")
@@ -140,7 +145,7 @@ def _rows(robot_name: str, take: str, variant: str, params: RetargetConfig) -> l
     robot = load_robot(robot_name)
     rows = []
     for name, clip in clips(take, variant):
-        _, quality, seconds = retarget_and_score(clip, robot, params)
+        result, quality, seconds = retarget_and_score(clip, robot, params)
         row = {
             "robot": robot_name,
             "take": take,
@@ -150,10 +155,29 @@ def _rows(robot_name: str, take: str, variant: str, params: RetargetConfig) -> l
             "ours": {key: quality[key] for key in KEPT},
         }
         if quality["pelvis_height_dev_p95_m"] > BARS["pelvis_height_dev_p95_m"]:
-            _, wider, _ = retarget_and_score(clip, _wider_ranges(robot), params)
-            row["wider_ranges_pelvis_p95_m"] = wider["pelvis_height_dev_p95_m"]
+            wider_robot = _wider_ranges(robot)
+            wider, wider_quality, _ = retarget_and_score(clip, wider_robot, params)
+            row["wider_ranges_pelvis_p95_m"] = wider_quality["pelvis_height_dev_p95_m"]
+            own = _pelvis_deviation(robot, result)
+            row["pelvis_excused_p95_m"] = excused_p95(own, _pelvis_deviation(wider_robot, wider))
         rows.append(row)
     return rows
+
+
+def excused_p95(own: np.ndarray, wider: np.ndarray) -> float:
+    """The pelvis p95 of `own` (T,) deviations with each frame over the bar that its wider-ranges
+    copy (`wider`, (T,)) brings within it read as the copy reads it: the ranges explain those
+    frames. Frame by frame, not the copy's own p95, which also counts the frames the copy alone
+    puts over the bar (its median offset moves)."""
+    bar = BARS["pelvis_height_dev_p95_m"]
+    excused = (np.abs(own) > bar) & (np.abs(wider) <= bar)
+    return round(float(np.percentile(np.abs(np.where(excused, wider, own)), 95.0)), 3)
+
+
+def _pelvis_deviation(robot: Robot, result: RetargetResult) -> np.ndarray:
+    """(T,) the pelvis ruler of `retarget_quality`, frame by frame."""
+    series = quality_series(robot, result.reference, human_pelvis=result.targets.human_pelvis)
+    return series["pelvis_height_dev_m"]
 
 
 def _wider_ranges(robot: Robot) -> Robot:
@@ -181,14 +205,15 @@ def _table(rows: list[dict], overrides: dict[str, str]) -> str:
     order = {(variant, robot): i for i, (variant, robot) in enumerate((v, r) for v in VARIANTS for r in ROBOT_ORDER)}
     rows = sorted(rows, key=lambda row: (row["take"], order.get((row["variant"], row["robot"]), 99), row["clip"]))
     lines = [
-        "| robot | clip | s | skate mm/s | pen mm | jl | vel | self-coll | pelvis p95 m (wider ranges) "
+        "| robot | clip | s | skate mm/s | pen mm | jl | vel | self-coll | pelvis p95 m (wider ranges; excused) "
         "| kp mean mm | kp p95 mm | diverged | verdict |",
         "|" + "---|" * 13,
     ]
     for row in rows:
         q = row["ours"]
-        wider = row.get("wider_ranges_pelvis_p95_m")
-        pelvis = f"{q['pelvis_height_dev_p95_m']:.3f}" + (f" ({wider:.3f})" if wider is not None else "")
+        pelvis = f"{q['pelvis_height_dev_p95_m']:.3f}"
+        if "wider_ranges_pelvis_p95_m" in row:
+            pelvis += f" ({row['wider_ranges_pelvis_p95_m']:.3f}; {row['pelvis_excused_p95_m']:.3f})"
         cells = [
             row["robot"],
             row["clip"],
@@ -207,8 +232,10 @@ def _table(rows: list[dict], overrides: dict[str, str]) -> str:
         lines.append("| " + " | ".join(cells) + " |")
     lines = [_summary(rows), "", *lines, ""]
     changed = ", ".join(f"`{k}={v}`" for k, v in overrides.items()) or "none (the stage's defaults)"
-    lines.append(f"Retarget params changed: {changed}. Bold: over the bar. A pelvis miss whose wider-ranges")
-    lines.append("copy (in brackets) meets 0.10 m is explained by the robot's ranges and not counted as a miss.")
+    lines.append(f"Retarget params changed: {changed}. Bold: over the bar. In brackets after a pelvis miss: the")
+    lines.append("p95 of its wider-ranges copy, then the robot's p95 with each frame the copy brings within 0.10 m")
+    lines.append("read as the copy reads it. Where that meets 0.10 m, the robot's ranges explain the miss and it is")
+    lines.append("not counted as one.")
     return "\n".join(lines) + "\n"
 
 
@@ -235,7 +262,7 @@ def _summary(rows: list[dict]) -> str:
 
 
 def _explained(row: dict) -> bool:
-    return row["wider_ranges_pelvis_p95_m"] <= BARS["pelvis_height_dev_p95_m"]
+    return row["pelvis_excused_p95_m"] <= BARS["pelvis_height_dev_p95_m"]
 
 
 def _bold(value: float, key: str) -> str:

@@ -54,6 +54,8 @@ class RetargetTargets:
     """Global human-to-robot scale (leg-length ratio) applied to the root."""
     human_pelvis: np.ndarray
     """(T, 3) the human hips scaled by `human_scale`, before any shaping (the pelvis height ruler)."""
+    human_standing: np.ndarray
+    """(T,) the human stands (`TargetShaping.standing_hips_fraction`): the frames the feet's soles are learnt on."""
 
     @property
     def n_frames(self) -> int:
@@ -185,6 +187,7 @@ def build_targets(
         body_contact=resting,
         human_scale=root_scale,
         human_pelvis=human_pos[:, index[PELVIS]] * root_scale,
+        human_standing=standing,
     )
 
 
