@@ -289,11 +289,8 @@ class LagRepair:
     """... and at least this much above it."""
     padding_s: float = 1.0
     """Seconds re-solved before and after a lagging stretch (overlapping windows merge)."""
-    guide_cost: float = 4.0
-    """Posture cost pulling the re-solve towards the frame's better solution. At 1 the re-solve
-    slid back onto the branch it was repairing: H1 ground2_subject2 75-95 s stayed lying while the
-    performer sat up, keypoints 0.4-0.6 m off; at 4 and at 10 it follows the backward solve up
-    (pelvis p95 0.285 -> 0.146 m)."""
+    guide_cost: float = 1.0
+    """Posture cost pulling the re-solve towards the frame's better solution."""
     rejoin_s: float = 0.5
     """After the stretch, seconds over which the re-solve is guided back to and cross-faded into the
     first solution, so the splice is continuous."""
