@@ -39,7 +39,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
-from bench.retarget_variants import BARS, FLOOR_CUT, _wider_ranges, clips, floor_cut
+from bench.retarget_variants import BARS, FLOOR_CUT, _wider_ranges, clips, floor_cut, pelvis_deviation
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.config import RetargetConfig
@@ -221,9 +221,8 @@ def _stretch(robot: Robot, own: _Scored, cause: np.ndarray, frames: np.ndarray, 
 
 def _within_whole_take(robot: Robot, result: RetargetResult, start_s: float, frames: int) -> float:
     """The pelvis ruler over the cut's seconds inside the whole take, retargeted from its start."""
-    scored = _scored(robot, result)
     first = round(start_s * result.reference.fps)
-    window = scored.deviation[first : first + frames]
+    window = pelvis_deviation(robot, result)[first : first + frames]
     return _p95(window - np.median(window))
 
 

@@ -169,10 +169,10 @@ def _on_wider_ranges(robot: Robot, clip: HumanMotion, params: RetargetConfig, re
     p95 with the frames the copy explains excused (`excused_p95`)."""
     wider_robot = _wider_ranges(robot)
     wider, quality, _ = retarget_and_score(clip, wider_robot, params)
-    own = _pelvis_deviation(robot, result)
+    own = pelvis_deviation(robot, result)
     return {
         "pelvis_p95_m": quality["pelvis_height_dev_p95_m"],
-        "pelvis_excused_p95_m": excused_p95(own, _pelvis_deviation(wider_robot, wider)),
+        "pelvis_excused_p95_m": excused_p95(own, pelvis_deviation(wider_robot, wider)),
         "skate_mm_s": quality["skate_stance_mean_mm_s"],
     }
 
@@ -187,7 +187,7 @@ def excused_p95(own: np.ndarray, wider: np.ndarray) -> float:
     return round(float(np.percentile(np.abs(np.where(excused, wider, own)), 95.0)), 3)
 
 
-def _pelvis_deviation(robot: Robot, result: RetargetResult) -> np.ndarray:
+def pelvis_deviation(robot: Robot, result: RetargetResult) -> np.ndarray:
     """(T,) the pelvis ruler of `retarget_quality`, frame by frame."""
     series = quality_series(robot, result.reference, human_pelvis=result.targets.human_pelvis)
     return series["pelvis_height_dev_m"]

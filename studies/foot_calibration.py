@@ -23,11 +23,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from bench.retarget_variants import BARS, clips, floor_cut
+from bench.retarget_variants import BARS, clips, floor_cut, pelvis_deviation
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.config import RetargetConfig, TargetShaping
-from rd_pipeline.retarget.quality import FootMeshes, quality_series
+from rd_pipeline.retarget.quality import FootMeshes
 from rd_pipeline.retarget.retarget import retarget
 from rd_pipeline.retarget.targets import RetargetTargets, build_targets
 from rd_pipeline.robots import Robot, load_robot
@@ -70,9 +70,7 @@ def _cut(take: str, seconds: tuple[int, int]) -> HumanMotion:
 
 def _pelvis_deviation(robot: Robot, clip: HumanMotion, shape: TargetShaping) -> np.ndarray:
     """(T,) the pelvis ruler's per-frame deviation (m) of the clip retargeted with `shape`."""
-    result = retarget(clip, robot, dataclasses.replace(RetargetConfig(), shape=shape))
-    series = quality_series(robot, result.reference, human_pelvis=result.targets.human_pelvis)
-    return series["pelvis_height_dev_m"]
+    return pelvis_deviation(robot, retarget(clip, robot, dataclasses.replace(RetargetConfig(), shape=shape)))
 
 
 def main() -> None:
