@@ -117,6 +117,10 @@ def test_a_qp_solver_that_is_not_installed_is_one_line(artifacts: Path) -> None:
         ),
         ("validate.protocol.grid_s=0", "parameter 'validate.protocol.grid_s' must be positive, got 0.0"),
         ("parse.length_unit_m=0", "parameter 'parse.length_unit_m' must be positive, got 0.0"),
+        (
+            "retarget.repair.guide_costs=1,0",
+            "parameter 'retarget.repair.guide_costs' must be one or more positive costs, got (1.0, 0.0)",
+        ),
         ("train.sampler.update_interval=0", "parameter 'train.sampler.update_interval' must be positive, got 0"),
         ("train.sampler.cap_factor=0.5", "parameter 'train.sampler.cap_factor' must be at least 1, got 0.5"),
     ],

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from rd_pipeline.motion.contact import ContactThresholds
-from rd_pipeline.params import require_non_negative, require_positive
+from rd_pipeline.params import ParamRangeError, require_non_negative, require_positive
 
 
 @dataclass(frozen=True)
@@ -289,8 +289,12 @@ class LagRepair:
     """... and at least this much above it."""
     padding_s: float = 1.0
     """Seconds re-solved before and after a lagging stretch (overlapping windows merge)."""
-    guide_cost: float = 1.0
-    """Posture cost pulling the re-solve towards the frame's better solution."""
+    guide_costs: tuple[float, ...] = (1.0, 4.0)
+    """Posture costs pulling the re-solve towards the frame's better solution: the stretch is
+    re-solved at each, and the one with the lowest mean keypoint error over the stretch is kept.
+    No one cost suits every stretch: at 1, H1 ground2_subject2 75-95 s slid back onto the lying
+    branch while the performer sat up (pelvis p95 0.285 m; 0.146 at 4); at 4, G1 ground2_subject2
+    61-70 s followed the backward solve frame by frame onto a worse stretch (0.080 -> 0.130)."""
     rejoin_s: float = 0.5
     """After the stretch, seconds over which the re-solve is guided back to and cross-faded into the
     first solution, so the splice is continuous."""
@@ -300,6 +304,10 @@ class LagRepair:
     because the ranges cannot reach the pose: there all 8 catch-up iterations ran for a median
     gain of 0.01 mm. The forward solve keeps every catch-up iteration: cut there, they moved a
     getting-up take onto a worse branch."""
+
+    def __post_init__(self) -> None:
+        if not self.guide_costs or min(self.guide_costs) <= 0:
+            raise ParamRangeError("guide_costs", f"must be one or more positive costs, got {self.guide_costs}")
 
 
 @dataclass(frozen=True)

@@ -62,7 +62,8 @@ def repair_lag(ik: RetargetIk, qpos: np.ndarray, repair: LagRepair) -> tuple[np.
     out = qpos.copy()
     repaired = 0
     for window in lagging_windows(errors, ik.targets.fps, repair):
-        candidate = _solve_window_again(ik, out, errors, window, lag_limit, repair)
+        guide = _guide(ik, out, errors, window, lag_limit, repair)
+        candidate = _best_re_solve(ik, out, guide, window, lag_limit, repair)
         span = slice(window.anchor + 1, window.rejoin_end + 1)
         candidate_errors = ik.keypoint_errors(candidate, window.anchor + 1)
         lowers_peak = candidate_errors.max() < errors[span].max()
@@ -72,6 +73,16 @@ def repair_lag(ik: RetargetIk, qpos: np.ndarray, repair: LagRepair) -> tuple[np.
             errors[span] = candidate_errors
             repaired += 1
     return out, repaired
+
+
+def _best_re_solve(
+    ik: RetargetIk, qpos: np.ndarray, guide: np.ndarray, window: RepairWindow, lag_limit: float, repair: LagRepair
+) -> np.ndarray:
+    """The window re-solved towards `guide` at each of `repair.guide_costs`, the one with the lowest
+    mean keypoint error over the window (the first on a tie)."""
+    candidates = [_solve_window_again(ik, qpos, guide, window, lag_limit, cost, repair) for cost in repair.guide_costs]
+    mean_errors = [ik.keypoint_errors(c, window.anchor + 1).mean() for c in candidates]
+    return candidates[int(np.argmin(mean_errors))]
 
 
 def _brings_contact(ik: RetargetIk, candidate: np.ndarray, first: np.ndarray) -> bool:
@@ -86,7 +97,7 @@ def _brings_contact(ik: RetargetIk, candidate: np.ndarray, first: np.ndarray) ->
     return False
 
 
-def _solve_window_again(
+def _guide(
     ik: RetargetIk,
     qpos: np.ndarray,
     errors: np.ndarray,
@@ -94,9 +105,8 @@ def _solve_window_again(
     lag_limit: float,
     repair: LagRepair,
 ) -> np.ndarray:
-    """Frames after `anchor` up to `rejoin_end` solved forward again, guided per frame by the better
-    of the forward and a backward solve, then cross-faded into the forward solve after
-    `backward_start`."""
+    """Frames after `anchor` up to `rejoin_end`: per frame the better of the forward solve and a
+    backward solve from `backward_start`, the forward solve after it."""
     first = window.anchor
     end = window.backward_start
     last = window.rejoin_end
@@ -106,7 +116,24 @@ def _solve_window_again(
     better = backward_errors < errors[first + 1 : end]
     n_backward = end - first - 1
     guide[:n_backward] = np.where(better[:, None], backward, guide[:n_backward])
-    guide_task = mink.PostureTask(ik.robot.model, cost=repair.guide_cost)
+    return guide
+
+
+def _solve_window_again(
+    ik: RetargetIk,
+    qpos: np.ndarray,
+    guide: np.ndarray,
+    window: RepairWindow,
+    lag_limit: float,
+    guide_cost: float,
+    repair: LagRepair,
+) -> np.ndarray:
+    """Frames after `anchor` up to `rejoin_end` solved forward again, pulled towards `guide` at
+    `guide_cost`, then cross-faded into the forward solve after `backward_start`."""
+    first = window.anchor
+    end = window.backward_start
+    last = window.rejoin_end
+    guide_task = mink.PostureTask(ik.robot.model, cost=guide_cost)
     resolved = np.empty_like(guide)
     previous = qpos[first]
     ik.configuration.update(previous)
