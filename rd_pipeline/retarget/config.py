@@ -280,7 +280,8 @@ class LagRepair:
     A forward solve can stay on a branch the human has left (bent over while the human already
     sits); solved backward from where it has caught up again, the same stretch often is not. The
     stretch is solved forward once more, guided towards whichever solution is closer to the targets
-    frame by frame, within the same per-frame limits, and kept only if it lags less.
+    frame by frame, within the same per-frame limits, once per guide cost; the best of those is
+    kept only if it lags less.
     """
 
     error_ratio: float = 2.0
