@@ -325,14 +325,18 @@ def _repair_with(monkeypatch, robot, qpos: np.ndarray, offset: float, pose: np.n
     from rd_pipeline.retarget import repair as repair_module
     from rd_pipeline.retarget.config import LagRepair
 
-    def solve_again(ik, qpos, errors, window, lag_limit, repair) -> np.ndarray:
-        candidate = qpos[window.anchor + 1 : window.rejoin_end + 1].copy()
+    def forward_frames(ik, qpos, errors, window, lag_limit, repair) -> np.ndarray:
+        return qpos[window.anchor + 1 : window.rejoin_end + 1].copy()
+
+    def solve_again(ik, qpos, guide, window, lag_limit, repair) -> np.ndarray:
+        candidate = guide.copy()
         candidate[:, robot.qpos_indices] += offset
         if pose is not None:
             candidate[len(candidate) // 2] = pose
         return candidate
 
-    monkeypatch.setattr(repair_module, "_solve_window_again", solve_again)
+    monkeypatch.setattr(repair_module, "_guide", forward_frames)
+    monkeypatch.setattr(repair_module, "_best_re_solve", solve_again)
     return repair_module.repair_lag(_LaggingIk(robot), qpos, LagRepair())
 
 
