@@ -328,12 +328,12 @@ def _repair_with(monkeypatch, robot, qpos: np.ndarray, offset: float, pose: np.n
     def forward_frames(ik, qpos, errors, window, lag_limit, repair) -> np.ndarray:
         return qpos[window.anchor + 1 : window.rejoin_end + 1].copy()
 
-    def solve_again(ik, qpos, guide, window, lag_limit, repair) -> np.ndarray:
+    def solve_again(ik, qpos, guide, window, lag_limit, repair) -> tuple[np.ndarray, np.ndarray]:
         candidate = guide.copy()
         candidate[:, robot.qpos_indices] += offset
         if pose is not None:
             candidate[len(candidate) // 2] = pose
-        return candidate
+        return candidate, ik.keypoint_errors(candidate, window.anchor + 1)
 
     monkeypatch.setattr(repair_module, "_guide", forward_frames)
     monkeypatch.setattr(repair_module, "_best_re_solve", solve_again)

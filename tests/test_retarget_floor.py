@@ -2,8 +2,9 @@
 
 Each test retargets a short excerpt of a real LAFAN1 take (for the G1 unless it names another
 robot) and asserts the issue's bars with the whole-body ruler: no body through the floor, the
-pelvis as low as the scaled human's, planted feet still, no limit, velocity or self-collision frame, no diverged frame, a root no
-faster than the human's hips, and the robot tilting and getting up when the human does.
+pelvis as low as the scaled human's, planted feet still, no limit, velocity or self-collision
+frame, no diverged frame, a root no faster than the human's hips, and the robot tilting and
+getting up when the human does.
 """
 
 from __future__ import annotations

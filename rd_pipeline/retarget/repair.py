@@ -63,9 +63,8 @@ def repair_lag(ik: RetargetIk, qpos: np.ndarray, repair: LagRepair) -> tuple[np.
     repaired = 0
     for window in lagging_windows(errors, ik.targets.fps, repair):
         guide = _guide(ik, out, errors, window, lag_limit, repair)
-        candidate = _best_re_solve(ik, out, guide, window, lag_limit, repair)
+        candidate, candidate_errors = _best_re_solve(ik, out, guide, window, lag_limit, repair)
         span = slice(window.anchor + 1, window.rejoin_end + 1)
-        candidate_errors = ik.keypoint_errors(candidate, window.anchor + 1)
         lowers_peak = candidate_errors.max() < errors[span].max()
         lowers_mean = candidate_errors.mean() <= errors[span].mean()
         if lowers_peak and lowers_mean and not _brings_contact(ik, candidate, out[span]):
@@ -77,12 +76,13 @@ def repair_lag(ik: RetargetIk, qpos: np.ndarray, repair: LagRepair) -> tuple[np.
 
 def _best_re_solve(
     ik: RetargetIk, qpos: np.ndarray, guide: np.ndarray, window: RepairWindow, lag_limit: float, repair: LagRepair
-) -> np.ndarray:
+) -> tuple[np.ndarray, np.ndarray]:
     """The window re-solved towards `guide` at each of `repair.guide_costs`, the one with the lowest
-    mean keypoint error over the window (the first on a tie)."""
+    mean keypoint error over the window (the first on a tie), and its per-frame errors."""
     candidates = [_solve_window_again(ik, qpos, guide, window, lag_limit, cost, repair) for cost in repair.guide_costs]
-    mean_errors = [ik.keypoint_errors(c, window.anchor + 1).mean() for c in candidates]
-    return candidates[int(np.argmin(mean_errors))]
+    errors = [ik.keypoint_errors(c, window.anchor + 1) for c in candidates]
+    best = int(np.argmin([e.mean() for e in errors]))
+    return candidates[best], errors[best]
 
 
 def _brings_contact(ik: RetargetIk, candidate: np.ndarray, first: np.ndarray) -> bool:
