@@ -1,5 +1,6 @@
-"""The plant lock on the G1 model: a planted foot stays where it landed under a pelvis that
-jitters, slides no farther than it must under one that runs away, and lets go when it lifts."""
+"""The plant lock on the G1 model: a planted foot stays over where it landed under a pelvis that
+jitters, at the height the earlier passes gave it, slides no farther than it must under a pelvis
+that runs away, and lets go when it lifts."""
 
 from __future__ import annotations
 
@@ -41,6 +42,23 @@ def test_a_planted_foot_stays_put_under_a_jittering_pelvis(
     drift_after = np.linalg.norm(after - after[0], axis=-1).max()
     assert drift_before > 0.004
     assert drift_after < 0.0002
+
+
+def test_a_planted_foot_keeps_the_height_the_earlier_passes_gave_it(
+    g1: Robot, foot_positions: Callable[[Robot, np.ndarray], np.ndarray]
+) -> None:
+    """The pelvis rises 15 mm over the plant and jitters sideways: the feet rise with it (as a
+    foot rolling onto its toes must, to stay out of the floor), and stay over where they landed."""
+    qpos = _standing(g1, 50)
+    qpos[:, :2] += np.random.default_rng(2).uniform(-0.004, 0.004, size=(50, 2))
+    qpos[:, 2] += np.linspace(0.0, 0.015, 50)
+    contact = np.ones((50, 2), dtype=bool)
+    before = foot_positions(g1, qpos)
+    after = foot_positions(g1, _lock(g1, qpos, contact))
+    horizontal_drift = np.linalg.norm(after[..., :2] - after[0, :, :2], axis=-1).max()
+    assert horizontal_drift < 0.0002
+    assert np.abs(after[..., 2] - before[..., 2]).max() < 0.0005
+    assert after[-1, :, 2].min() - after[0, :, 2].max() > 0.014
 
 
 def test_the_lock_keeps_joint_ranges_and_velocities(

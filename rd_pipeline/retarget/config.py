@@ -220,7 +220,7 @@ class IkConfig:
 
 @dataclass(frozen=True)
 class PlantLockConfig:
-    """The last pass over planted feet: each plant's foot held at one point by its leg's joints."""
+    """The last pass over planted feet: each plant's foot held over one point by its leg's joints."""
 
     iterations: int = 6
     """Damped least-squares steps per planted frame at most (0: no lock)."""
@@ -232,7 +232,8 @@ class PlantLockConfig:
     """A held foot never moves more than this from where the earlier passes put it: past that, it
     slides along with them (pulling a dragged foot all the way back flips the leg)."""
     slip_m: float = 0.002
-    """A held foot the leg leaves farther than this from its point is held from where it is."""
+    """A held foot the leg leaves farther than this (horizontally) from its point is held from
+    where it is."""
     release_s: float = 0.1
     """After a foot lifts, seconds over which the hold eases off."""
     max_step_rad: float = 0.2

@@ -2,11 +2,15 @@
 
 The refinements before this pass trade the planted foot against a posture and a pelvis that
 move: on floor work the foot stays within millimetres of its target but jitters about it, and
-the skate ruler reads that jitter as sliding. Here a foot that lands is held at the point where
-it landed, frame by frame, by a few damped least-squares steps of that leg's joints alone. Where
+the skate ruler reads that jitter as sliding. Here a foot that lands is held, frame by frame, over
+the point where it landed, by a few damped least-squares steps of that leg's joints alone. Where
 the leg cannot reach the point (a range limit, a velocity limit) the foot slides only as far as
 it must, and is held from there on.
-"""
+
+Only the horizontal position is held; the foot's height stays the earlier passes', which kept
+every body above the floor. A foot that rolls over on the floor (from its sole onto its toes or
+its back, kneeling or crawling) must rise as it turns, or it goes into the floor: held at the
+height where it landed as well, the leg ran out of reach and the foot slid."""
 
 from __future__ import annotations
 
@@ -73,7 +77,7 @@ def lock_plants(
             goal = _goal(hold, free[t, k], release, settings.reach_m)
             reached = reach(robot, data, out[t], goal, feet[k], chains[k], (low, high), settings)
             # Out of reach, the foot slides as far as it must and is held from there.
-            if contact[t, k] and np.linalg.norm(reached - hold.point) > settings.slip_m:
+            if contact[t, k] and np.linalg.norm((reached - hold.point)[:2]) > settings.slip_m:
                 hold.point = reached
     return clear_pairs(robot, qpos, out, ik.pair_depth_limit_m)
 
@@ -107,9 +111,10 @@ def _update_hold(hold: _Hold | None, planted: bool, free: np.ndarray, release: i
 
 
 def _goal(hold: _Hold, free: np.ndarray, release: int, reach_m: float) -> np.ndarray:
-    """Where the foot goes this frame: the held point, at most `reach_m` from where the foot
-    would be without the hold, easing back to that after a release."""
+    """Where the foot goes this frame: over the held point at the height the foot has without the
+    hold, at most `reach_m` from where it would be, easing back to that after a release."""
     pull = hold.point - free
+    pull[2] = 0.0
     length = float(np.linalg.norm(pull))
     weight = 1.0 - smoothstep(np.asarray(hold.released / release))
     return free + pull * float(weight) * min(1.0, reach_m / max(length, 1e-9))
