@@ -7,10 +7,11 @@ the point where it landed, by a few damped least-squares steps of that leg's joi
 the leg cannot reach the point (a range limit, a velocity limit) the foot slides only as far as
 it must, and is held from there on.
 
-Only the horizontal position is held; the foot's height stays the earlier passes', which kept
-every body above the floor. A foot that rolls over on the floor (from its sole onto its toes or
-its back, kneeling or crawling) must rise as it turns, or it goes into the floor: held at the
-height where it landed as well, the leg ran out of reach and the foot slid."""
+Only the horizontal position is held, which is what slides; the foot's height stays the earlier
+passes', which kept every body above the floor. A foot that rolls over on the floor (from its sole
+onto its toes or its back, kneeling or crawling) must rise as it turns, or it goes into the floor:
+held at its landing height as well, floor-work plants slid more and the whole robot had to be
+lifted back out of the floor afterwards (`docs/studies/floor_work.md`, stage 25)."""
 
 from __future__ import annotations
 
