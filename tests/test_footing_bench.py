@@ -23,10 +23,11 @@ def test_the_retarget_stands_flatter_than_the_dataset(artifacts: Path, tmp_path:
     assert (rows["bvh"]["seconds"], rows["csv"]["seconds"]) == (132, 132)
     # Retarget stage 21's plant lock holds the foot's position, not its tilt: 6 -> 8 tilted
     # seconds, median 0.7 -> 0.9 deg, still far flatter than the dataset; stage 23 learns the
-    # sole from the plants made standing: 0.9 -> 0.8 deg.
-    assert len(rows["bvh"]["tilted_seconds"]) == 8
+    # sole from the plants made standing: 0.9 -> 0.8 deg; stage 25 leaves a held foot's height
+    # to the passes before: 8 -> 5 seconds, 0.8 -> 0.7 deg.
+    assert len(rows["bvh"]["tilted_seconds"]) == 5
     assert len(rows["csv"]["tilted_seconds"]) == 21
-    assert rows["bvh"]["median_tilt_deg"] == pytest.approx(0.8, abs=0.05)
+    assert rows["bvh"]["median_tilt_deg"] == pytest.approx(0.7, abs=0.05)
     assert rows["csv"]["median_tilt_deg"] == pytest.approx(5.6, abs=0.05)
     unknown = subprocess.run(
         [*script, "--robots", "h1_3", "--out", str(tmp_path / "unknown")],
