@@ -22,6 +22,12 @@ median offset removed; bar 0.10 m). Frames over the bar are grouped into stretch
 Each frame over the bar gets the first of these causes that holds (ranges, body, foot on its
 back, lost); the ones with none are left.
 
+The causes after the ranges are read off the robot; what they cost is measured on one more copy,
+free of the build: G1's leg ranges, every range 0.5 rad wider still (hip pitch and ankles too),
+and no body but the feet with any volume (each collision geom a point at its centre). A frame
+that copy also leaves over the bar is not the robot's build, as far as ranges and volume go: it is
+where the targets and the IK put the pelvis.
+
 The same seconds are then scored inside the whole take, retargeted from its start, with the same
 ruler over those seconds. `<out>.md` is the table, `<out>.json` the numbers.
 """
@@ -37,8 +43,10 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import mujoco
 import numpy as np
 
+from bench.retarget_ranges import widened_ranges, with_g1_leg_ranges
 from bench.retarget_variants import BARS, FLOOR_CUT, _wider_ranges, clips, floor_cut, pelvis_deviation
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
@@ -61,6 +69,8 @@ CAUSES = ("ranges", "body_rests", "foot_on_back", "lost", "left")
 """Why a frame is over the bar, in the order they are tried (see the module's docstring)."""
 BOUND_RAD = 0.02
 """A joint this close to a bound of its range sits at the bound."""
+BUILD_FREE_WIDEN_RAD = 0.5
+"""How much wider than G1's leg ranges every range of the build-free copy is, at both ends."""
 
 
 @dataclass(frozen=True)
@@ -106,6 +116,8 @@ def _report(robot: Robot, name: str) -> dict:
     own = _scored(robot, own_result)
     wider_robot = _wider_ranges(robot)
     wider = _scored(wider_robot, retarget(clip, wider_robot, RetargetConfig()))
+    free_robot = build_free(robot)
+    free = pelvis_deviation(free_robot, retarget(clip, free_robot, RetargetConfig()))
     whole_human = clips(take, "plain")[0][1]
     whole_result = retarget(whole_human, robot, RetargetConfig())
     soles = sole_directions(whole_human, whole_result.targets)
@@ -123,10 +135,25 @@ def _report(robot: Robot, name: str) -> dict:
         "wider_ranges_p95_m": _p95(wider.deviation),
         "frames_over": int(over.sum()),
         **{f"over_{key}": int((over & (cause == key)).sum()) for key in CAUSES},
+        "build_free_p95_m": _p95(free),
+        "over_past_build_free": int((over & (cause != "ranges") & (np.abs(free) > BAR_M)).sum()),
         "cut_frames_foot_on_back": int(on_back.sum()),
         "whole_take_same_seconds_p95_m": whole,
         "stretches": stretches,
     }
+
+
+def build_free(robot: Robot) -> Robot:
+    """A copy of `robot` without its build: G1's leg ranges, every range `BUILD_FREE_WIDEN_RAD`
+    wider, and every collision geom but the feet's a point at its centre."""
+    wider = widened_ranges(with_g1_leg_ranges(robot), BUILD_FREE_WIDEN_RAD)
+    model = wider.model
+    feet = {robot.body_ids[body] for body in robot.config.foot_bodies}
+    for geom in range(model.ngeom):
+        if model.geom_bodyid[geom] not in feet:
+            model.geom_type[geom] = mujoco.mjtGeom.mjGEOM_SPHERE
+            model.geom_size[geom] = (1e-6, 0.0, 0.0)
+    return wider
 
 
 def _causes(own: _Scored, wider: _Scored, on_back: np.ndarray) -> np.ndarray:
@@ -248,7 +275,9 @@ def _markdown(robot: str, reports: list[dict]) -> str:
             f"{report['frames']} frames over the bar: ranges {report['over_ranges']}, robot resting on its body "
             f"{report['over_body_rests']}, foot on its back {report['over_foot_on_back']}, lost {report['over_lost']}, "
             f"left {report['over_left']} "
-            f"({report['cut_frames_foot_on_back']} frames of the cut have a foot planted on its back).",
+            f"({report['cut_frames_foot_on_back']} frames of the cut have a foot planted on its back). "
+            f"The build-free copy: p95 {report['build_free_p95_m']:.3f} m; of the frames the ranges leave, "
+            f"{report['over_past_build_free']} are over the bar on it too.",
             "",
             "| seconds | frames | human hips m | robot - human m | ranges | body rests (on) | foot on its back | lost "
             "| left | legs at a bound |",

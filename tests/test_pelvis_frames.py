@@ -1,20 +1,22 @@
 """`bench/pelvis_frames.py` finds the human feet the targets plant on their backs: many on a
 floor cut that opens kneeling, none on a dance; and it learns each sole on the whole take, so a
-cut that never stands reads the same soles."""
+cut that never stands reads the same soles. Its build-free copy has no volume but the feet's and
+ranges wider than G1's legs, and leaves the robot it copies as it was."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from bench.pelvis_frames import planted_on_back, sole_directions
+from bench.pelvis_frames import BUILD_FREE_WIDEN_RAD, build_free, planted_on_back, sole_directions
 from bench.retarget_variants import clips, floor_cut
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.retarget.quality import FootMeshes
 from rd_pipeline.retarget.targets import RetargetTargets, build_targets
-from rd_pipeline.robots import Robot
+from rd_pipeline.robots import Robot, load_robot
+from rd_pipeline.robots.hulls import BodyHulls
 
 FPS = 50.0
 
@@ -50,3 +52,31 @@ def test_a_clip_that_never_stands_has_no_sole_to_learn(g1: Robot) -> None:
     message = "the human never stands on the LeftFoot foot: no sole direction to learn"
     with pytest.raises(PipelineError, match=f"^{message}$"):
         sole_directions(crawl, _targets(g1, crawl))
+
+
+def test_the_build_free_copy_has_no_volume_but_the_feet_and_wider_ranges(g1: Robot) -> None:
+    h1 = load_robot("h1")
+    own = BodyHulls.from_robot(h1)
+    free = BodyHulls.from_robot(build_free(h1))
+    feet = h1.config.foot_bodies
+    for name, radii, points in zip(free.body_names, free.radii, free.points):
+        mine = own.body_names.index(name)
+        if name in feet:
+            np.testing.assert_array_equal(points, own.points[mine])
+        else:
+            # One point per geom (a sphere of no size) where the robot has a mesh or a capsule.
+            assert radii.max() < 1e-5, name
+            assert len(points) < len(own.points[mine]), name
+    hip = own.points[own.body_names.index("left_hip_pitch_link")]
+    assert np.ptp(hip, axis=0).max() > 0.05
+    knee = h1.model.joint("left_knee_joint").id
+    g1_knee = g1.model.joint("left_knee_joint").id
+    ankle = h1.model.joint("left_ankle_joint").id
+    copy = build_free(h1).model
+    np.testing.assert_allclose(
+        copy.jnt_range[knee], g1.model.jnt_range[g1_knee] + [-BUILD_FREE_WIDEN_RAD, BUILD_FREE_WIDEN_RAD]
+    )
+    np.testing.assert_allclose(
+        copy.jnt_range[ankle], h1.model.jnt_range[ankle] + [-BUILD_FREE_WIDEN_RAD, BUILD_FREE_WIDEN_RAD]
+    )
+    assert h1.model.jnt_range[knee][1] == pytest.approx(2.05, abs=0.01)
