@@ -43,10 +43,9 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import mujoco
 import numpy as np
 
-from bench.retarget_ranges import widened_ranges, with_g1_leg_ranges
+from bench.retarget_ranges import build_free
 from bench.retarget_variants import BARS, FLOOR_CUT, _wider_ranges, clips, floor_cut, pelvis_deviation
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
@@ -69,8 +68,6 @@ CAUSES = ("ranges", "body_rests", "foot_on_back", "lost", "left")
 """Why a frame is over the bar, in the order they are tried (see the module's docstring)."""
 BOUND_RAD = 0.02
 """A joint this close to a bound of its range sits at the bound."""
-BUILD_FREE_WIDEN_RAD = 0.5
-"""How much wider than G1's leg ranges every range of the build-free copy is, at both ends."""
 
 
 @dataclass(frozen=True)
@@ -141,19 +138,6 @@ def _report(robot: Robot, name: str) -> dict:
         "whole_take_same_seconds_p95_m": whole,
         "stretches": stretches,
     }
-
-
-def build_free(robot: Robot) -> Robot:
-    """A copy of `robot` without its build: G1's leg ranges, every range `BUILD_FREE_WIDEN_RAD`
-    wider, and every collision geom but the feet's a point at its centre."""
-    wider = widened_ranges(with_g1_leg_ranges(robot), BUILD_FREE_WIDEN_RAD)
-    model = wider.model
-    feet = {robot.body_ids[body] for body in robot.config.foot_bodies}
-    for geom in range(model.ngeom):
-        if model.geom_bodyid[geom] not in feet:
-            model.geom_type[geom] = mujoco.mjtGeom.mjGEOM_SPHERE
-            model.geom_size[geom] = (1e-6, 0.0, 0.0)
-    return wider
 
 
 def _causes(own: _Scored, wider: _Scored, on_back: np.ndarray) -> np.ndarray:

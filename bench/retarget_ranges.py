@@ -11,6 +11,10 @@ counterfactual copies, and all are scored with the same ruler (`bench/retarget.p
 - `g1_legs` (H1 and H1-2 only): hip yaw, hip roll and knee ranges taken from G1 (same side, same
   joint kind). H1 turns and spreads its hips only ±0.43 rad and bends its knees to 2.05 rad.
 
+One more copy is not in this table: `build_free` takes G1's legs, widens every range 0.5 rad more
+and leaves no body but the feet any volume, so nothing of the robot's build holds it back
+(`bench/pelvis_frames.py`, `bench/retarget_variants.py --build-free`).
+
 What a copy fixes is what the ranges cost; what it leaves is the retargeter's (or the rest of the
 robot's build, e.g. H1's single-axis ankle). A copy is not a robot: its joint-limit column is
 measured against its own wider ranges. Each finished row is appended to `<out>.jsonl`; `<out>.md`
@@ -30,6 +34,8 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
+import mujoco
+
 from bench.retarget import in_take_order, pending, resume_log, retarget_and_score, shared_takes
 from rd_pipeline import paths
 from rd_pipeline.motion.bvh import read_bvh
@@ -38,6 +44,8 @@ from rd_pipeline.robots import Robot, load_robot
 
 G1_LEG_KINDS = ("hip_yaw", "hip_roll", "knee")
 """Joint kinds whose ranges the `g1_legs` copy takes from G1."""
+BUILD_FREE_WIDEN_RAD = 0.5
+"""How much wider than G1's leg ranges every range of the build-free copy is, at both ends."""
 VARIANTS = ("own", "g1_legs", "widened")
 COLUMNS = {
     "diverged_frames": "diverged",
@@ -109,6 +117,19 @@ def with_g1_leg_ranges(robot: Robot) -> Robot:
         side = name.split("_")[0]
         model.jnt_range[model.joint(name).id] = g1.model.jnt_range[g1.model.joint(f"{side}_{kind}_joint").id]
     return dataclasses.replace(robot, model=model)
+
+
+def build_free(robot: Robot) -> Robot:
+    """A copy of `robot` without its build: G1's leg ranges, every range `BUILD_FREE_WIDEN_RAD`
+    wider, and every collision geom but the feet's a point at its centre."""
+    wider = widened_ranges(with_g1_leg_ranges(robot), BUILD_FREE_WIDEN_RAD)
+    model = wider.model
+    feet = {robot.body_ids[body] for body in robot.config.foot_bodies}
+    for geom in range(model.ngeom):
+        if model.geom_bodyid[geom] not in feet:
+            model.geom_type[geom] = mujoco.mjtGeom.mjGEOM_SPHERE
+            model.geom_size[geom] = (1e-6, 0.0, 0.0)
+    return wider
 
 
 def _change(row: dict, key: str) -> str:

@@ -2,14 +2,16 @@
 
     python -m bench.retarget_variants [--robots g1 g1_29dof h1 h1_2] [--takes ...]
                                       [--variants plain mirror tempo_1.25 tempo_0.8 floor_cut]
-                                      [--set ik.hold_touchdowns=false] [--jobs 2] [--resume]
+                                      [--set ik.hold_touchdowns=false] [--build-free] [--jobs 2] [--resume]
                                       [--out bench/results/retarget_variants]
 
 The shared takes are what the retargeter was tuned on; the variants (`bench/motion_variants.py`)
 are motion it has not seen: mirrored, played 1.25 times faster or 0.8 times as fast, and the floor
 work (pelvis below 0.5 m for at least 3 s) cut out of each take so the clip opens lying or
 crawling. `--set` changes the retarget params (`typed_config` names: `ik.hold_touchdowns=false`)
-to compare a change on the same rows.
+to compare a change on the same rows. `--build-free` scores each robot's build-free copy instead
+(`bench/retarget_ranges.py`: no range or body volume holds it back), to say how much of a figure
+the robot's build costs; its penetration and self-collision columns read bodies without volume.
 
 Each row is scored by `retarget_quality` against the scaled human, with the issue's bars: skate
 15 mm/s, penetration 10 mm, no joint-limit, velocity-limit or self-collision frame, pelvis height
@@ -37,7 +39,7 @@ import numpy as np
 
 from bench.motion_variants import floor_cuts, mirrored, played_at
 from bench.retarget import resume_log, retarget_and_score, shared_takes
-from bench.retarget_ranges import widened_ranges, with_g1_leg_ranges
+from bench.retarget_ranges import build_free, widened_ranges, with_g1_leg_ranges
 from rd_pipeline import paths
 from rd_pipeline.artifacts.stage import typed_config
 from rd_pipeline.errors import PipelineError
@@ -70,6 +72,12 @@ KEPT = (
     "diverged_frames",
 )
 """The quality figures a row keeps."""
+BUILD_FREE_NOTE = (
+    "Every row is scored on the robot's build-free copy (`--build-free`, `bench/retarget_ranges.py`): G1's leg "
+    "ranges, every range 0.5 rad wider, no body but the feet with any volume. Its penetration and "
+    "self-collision columns read bodies without volume; there are no wider ranges to read."
+)
+"""What the table of a `--build-free` run opens with."""
 
 
 def main() -> None:
@@ -78,6 +86,7 @@ def main() -> None:
     parser.add_argument("--takes", nargs="+", default=shared_takes())
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     parser.add_argument("--set", nargs="*", default=[], help="retarget params, name=value")
+    parser.add_argument("--build-free", action="store_true", help="score the robots' build-free copies")
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--resume", action="store_true", help="keep the rows already in <out>.jsonl")
     parser.add_argument("--out", type=Path, default=Path("bench/results/retarget_variants"))
@@ -96,14 +105,17 @@ def main() -> None:
         if (robot, take, variant) not in done
     ]
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        futures = [pool.submit(_rows, *job, params) for job in todo]
+        futures = [pool.submit(_rows, *job, params, args.build_free) for job in todo]
         for future in as_completed(futures):
             for row in future.result():
                 rows.append(row)
                 with log.open("a") as file:
                     file.write(json.dumps(row) + "\n")
                 print(f"{row['robot']:<8} {row['clip']:<36} {_verdict(row)}", flush=True)
-    args.out.with_suffix(".md").write_text(_table(rows, overrides))
+    table = _table(rows, overrides)
+    if args.build_free:
+        table = BUILD_FREE_NOTE + "\n\n" + table
+    args.out.with_suffix(".md").write_text(table)
 
 
 def _overrides(items: list[str]) -> dict[str, str]:
@@ -145,8 +157,10 @@ def floor_cut(take: str, name: str) -> HumanMotion:
     return cuts[name]
 
 
-def _rows(robot_name: str, take: str, variant: str, params: RetargetConfig) -> list[dict]:
+def _rows(robot_name: str, take: str, variant: str, params: RetargetConfig, without_build: bool) -> list[dict]:
     robot = load_robot(robot_name)
+    if without_build:
+        robot = build_free(robot)
     rows = []
     for name, clip in clips(take, variant):
         result, quality, seconds = retarget_and_score(clip, robot, params)
@@ -158,7 +172,7 @@ def _rows(robot_name: str, take: str, variant: str, params: RetargetConfig) -> l
             "seconds": round(seconds, 2),
             "ours": {key: quality[key] for key in KEPT},
         }
-        if any(quality[key] > BARS[key] for key in WIDER_RANGES_READ):
+        if not without_build and any(quality[key] > BARS[key] for key in WIDER_RANGES_READ):
             row["wider_ranges"] = _on_wider_ranges(robot, clip, params, result)
         rows.append(row)
     return rows
@@ -225,10 +239,10 @@ def _table(rows: list[dict], overrides: dict[str, str]) -> str:
         q = row["ours"]
         wider = row.get("wider_ranges", {})
         pelvis = f"{q['pelvis_height_dev_p95_m']:.3f}"
-        if q["pelvis_height_dev_p95_m"] > BARS["pelvis_height_dev_p95_m"]:
+        if wider and q["pelvis_height_dev_p95_m"] > BARS["pelvis_height_dev_p95_m"]:
             pelvis += f" ({wider['pelvis_p95_m']:.3f}; {wider['pelvis_excused_p95_m']:.3f})"
         skate = _bold(q["skate_stance_mean_mm_s"], "skate_stance_mean_mm_s")
-        if q["skate_stance_mean_mm_s"] > BARS["skate_stance_mean_mm_s"]:
+        if wider and q["skate_stance_mean_mm_s"] > BARS["skate_stance_mean_mm_s"]:
             skate += f" ({wider['skate_mm_s']:.1f})"
         cells = [
             row["robot"],
@@ -282,7 +296,7 @@ def _pelvis_explained(row: dict) -> bool:
     """The row misses the pelvis bar and meets it with the frames the wider ranges explain excused."""
     bar = BARS["pelvis_height_dev_p95_m"]
     over = row["ours"]["pelvis_height_dev_p95_m"] > bar
-    return over and row["wider_ranges"]["pelvis_excused_p95_m"] <= bar
+    return over and "wider_ranges" in row and row["wider_ranges"]["pelvis_excused_p95_m"] <= bar
 
 
 def _bold(value: float, key: str) -> str:

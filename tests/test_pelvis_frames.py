@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.pelvis_frames import BUILD_FREE_WIDEN_RAD, build_free, planted_on_back, sole_directions
+from bench.pelvis_frames import planted_on_back, sole_directions
+from bench.retarget_ranges import BUILD_FREE_WIDEN_RAD, build_free
 from bench.retarget_variants import clips, floor_cut
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
