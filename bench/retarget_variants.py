@@ -1,14 +1,17 @@
 """Benchmark: retargeting on variants of the shared takes, beside the plain takes, one ruler.
 
     python -m bench.retarget_variants [--robots g1 g1_29dof h1 h1_2] [--takes ...]
-                                      [--variants plain mirror tempo_1.25 tempo_0.8 floor_cut]
+                                      [--variants plain mirror tempo_1.25 tempo_0.8 floor_cut
+                                                  floor_cut_mirror floor_cut_tempo_1.25 floor_cut_tempo_0.8]
                                       [--set ik.hold_touchdowns=false] [--build-free] [--jobs 2] [--resume]
                                       [--out bench/results/retarget_variants]
 
 The shared takes are what the retargeter was tuned on; the variants (`bench/motion_variants.py`)
 are motion it has not seen: mirrored, played 1.25 times faster or 0.8 times as fast, and the floor
 work (pelvis below 0.5 m for at least 3 s) cut out of each take so the clip opens lying or
-crawling. `--set` changes the retarget params (`typed_config` names: `ik.hold_touchdowns=false`)
+crawling, and cut the same way out of the mirrored, faster and slower takes (`floor_cut_mirror`,
+`floor_cut_tempo_1.25`, `floor_cut_tempo_0.8`: two perturbations at once; the slower take's
+stretches are longer, its cuts cover other seconds). `--set` changes the retarget params (`typed_config` names: `ik.hold_touchdowns=false`)
 to compare a change on the same rows. `--build-free` scores each robot's build-free copy instead
 (`bench/retarget_ranges.py`: no range or body volume holds it back), to say how much of a figure
 the robot's build costs; its penetration and self-collision columns read bodies without volume.
@@ -50,7 +53,16 @@ from rd_pipeline.retarget.quality import quality_series
 from rd_pipeline.retarget.retarget import RetargetResult
 from rd_pipeline.robots import Robot, load_robot
 
-VARIANTS = ("plain", "mirror", "tempo_1.25", "tempo_0.8", "floor_cut")
+VARIANTS = (
+    "plain",
+    "mirror",
+    "tempo_1.25",
+    "tempo_0.8",
+    "floor_cut",
+    "floor_cut_mirror",
+    "floor_cut_tempo_1.25",
+    "floor_cut_tempo_0.8",
+)
 FLOOR_CUT = {"pelvis": "Hips", "low_m": 0.5, "min_s": 3.0, "length_s": 20.0, "count": 2}
 """Floor cuts: stretches where the pelvis stays below `low_m` for `min_s`, the `count` longest
 per take, each `length_s` long (`floor_cuts`)."""
@@ -136,6 +148,10 @@ def _checked_params(overrides: dict[str, str]) -> RetargetConfig:
 
 def clips(take: str, variant: str) -> list[tuple[str, HumanMotion]]:
     """The named clips one variant makes of a take (floor cuts: none, one or several)."""
+    if variant.startswith("floor_cut"):
+        whole_name, whole = clips(take, variant.removeprefix("floor_cut").lstrip("_") or "plain")[0]
+        cuts = floor_cuts(whole, **FLOOR_CUT)
+        return [(f"{whole_name} {start:.0f}-{start + FLOOR_CUT['length_s']:.0f} s", clip) for start, clip in cuts]
     human = human_motion_from_bvh(read_bvh(paths.bvh_path(take)), LAFAN_CM_TO_M, LAFAN_TO_Z_UP)
     if variant == "plain":
         return [(take, human)]
@@ -144,8 +160,7 @@ def clips(take: str, variant: str) -> list[tuple[str, HumanMotion]]:
     if variant.startswith("tempo_"):
         tempo = float(variant.removeprefix("tempo_"))
         return [(f"{take} x{tempo:g}", played_at(human, tempo))]
-    cuts = floor_cuts(human, **FLOOR_CUT)
-    return [(f"{take} {start:.0f}-{start + FLOOR_CUT['length_s']:.0f} s", clip) for start, clip in cuts]
+    raise PipelineError(f"no variant '{variant}' (the variants: {', '.join(VARIANTS)})")
 
 
 def floor_cut(take: str, name: str) -> HumanMotion:
