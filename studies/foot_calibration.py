@@ -34,8 +34,9 @@ from rd_pipeline.robots import Robot, load_robot
 
 FPS = 50.0
 """The retargeter's output rate."""
-EVERY_PLANT = dataclasses.replace(TargetShaping(), standing_hips_fraction=10.0)
-"""No frame counts as standing, so the feet are learnt from every plant (the rule before stage 23)."""
+EVERY_PLANT = dataclasses.replace(TargetShaping(), standing_hips_fraction=10.0, upright_shin_fraction=10.0)
+"""No frame counts as standing or the shin as upright, so the feet are learnt from every plant (the
+rule before stage 23)."""
 
 
 def foot_turn_from_whole_take(

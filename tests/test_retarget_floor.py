@@ -149,13 +149,13 @@ def test_a_stretch_stuck_on_the_wrong_branch_is_solved_again() -> None:
 def test_a_robot_left_lying_while_the_human_sits_up_is_repaired_by_the_stronger_guide() -> None:
     """H1 on ground2_subject2 82-95 s: the performer sits up from lying and the forward IK keeps
     the trunk flat. Re-solved with the guide at cost 1 alone the stretch slides back onto the lying
-    branch and no re-solve lowers its error; among the default costs one does."""
+    branch (over a hundred frames still lost); among the default costs one brings it up."""
     human = _excerpt("ground2_subject2", 82.0, 95.0)
     weak, default = _with_repairs(human, "h1", LagRepair(guide_costs=(1.0,)), LagRepair())
-    assert weak[0] == 0 and default[0] >= 1
-    assert default[1]["pelvis_height_dev_p95_m"] < 0.75 * weak[1]["pelvis_height_dev_p95_m"]
+    assert default[0] >= 1
+    assert weak[1]["diverged_frames"] > 100 and default[1]["diverged_frames"] == 0
+    assert default[1]["pelvis_height_dev_p95_m"] < 0.8 * weak[1]["pelvis_height_dev_p95_m"]
     assert default[1]["keypoint_error_p95_mm"] < 0.75 * weak[1]["keypoint_error_p95_mm"]
-    assert default[1]["diverged_frames"] < weak[1]["diverged_frames"]
     assert default[1]["skate_stance_mean_mm_s"] <= 15.0
     for figure in ("penetration_max_mm", "self_collision_frames", "joint_limit_violations"):
         assert default[1][figure] == 0, figure

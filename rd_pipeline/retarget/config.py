@@ -49,10 +49,17 @@ class TargetShaping:
     knee to ankle). How the human foot lies on its sole is learnt from the plants made standing:
     kneeling, a planted foot may rest on its back, and a clip that opens on the floor would teach
     the robot to lay its sole flat where the human's faces up."""
+    upright_shin_fraction: float = 0.7
+    """Where a foot is never planted standing, its sole is learnt from the plants whose knee is
+    higher above the ankle than this fraction of the shin: a foot under an upright shin lies on
+    its sole (a half-kneel's front foot), while kneeling on the toes or the backs of the feet would
+    teach it upside down. A foot with neither borrows the other foot's lesson; only where both
+    have none is it learnt from every plant."""
 
     def __post_init__(self) -> None:
         require_positive(self, "swing_clearance_m")
         require_positive(self, "standing_hips_fraction")
+        require_positive(self, "upright_shin_fraction")
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,18 @@ class _Plant:
 
 
 @dataclass(frozen=True)
+class SoleFrames:
+    """Where a foot learns how the human foot joint lies when its sole is flat on the floor."""
+
+    trusted: tuple[np.ndarray, ...]
+    """(T,) bool frames, in order of preference: the plants made in the first that has any teach it."""
+    borrowed: Rotation | None = None
+    """The other foot's lesson, taken where no trusted frame is planted: learnt on the same
+    plants, the two feet's agree within a few degrees, while a foot's own kneeling plants would
+    teach it upside down."""
+
+
+@dataclass(frozen=True)
 class _Swing:
     """Frames [start, end) between two plants (or a plant and an end of the clip)."""
 
@@ -48,12 +60,12 @@ def plant_foot(
     pelvis_yaw: np.ndarray,
     yaw_range: tuple[float, float],
     human_path: np.ndarray,
-    standing: np.ndarray,
+    sole_frames: SoleFrames,
     shape: TargetShaping,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Rotation | None]:
     """Foot targets: fixed and flat while planted; in swing, the human path bent to meet the plants.
-    Returns positions, rotations, the height the sole clears the floor by (0 while planted) and
-    the contact labels the plants were made from.
+    Returns positions, rotations, the height the sole clears the floor by (0 while planted), the
+    contact labels the plants were made from, and the sole's lesson if trusted frames taught it.
 
     A plant ends where the foot target has drifted `shape.plant_drift.target_m` from it while the
     human foot (`human_path`, scaled like the pelvis) has slid `plant_drift.human_m` (a shuffle
@@ -61,7 +73,7 @@ def plant_foot(
 
     Swing orientation follows the human foot joint (its toe line is useless as a heading when the
     foot points down), through the constant offset that makes it flat and aligned during the plants
-    made `standing` ((T,) bool).
+    made in `sole_frames`' trusted frames.
     """
     n = free.shape[0]
     drift = shape.plant_drift
@@ -72,7 +84,7 @@ def plant_foot(
     plants = _plants(contact, free, sole)
     heading = _planted_heading(forward, plants, pelvis_yaw, yaw_range)
     flat = Rotation.from_matrix(yaw_pitch_frame(heading, np.zeros(n)))
-    swinging = _swing_orientation(human_rotation, flat, contact, standing)
+    swinging, lesson = _swing_orientation(human_rotation, flat, contact, sole_frames)
     flat = _keep_planted_tilt(flat, swinging, plants, shape.planted_tilt_rad)
     position = free.copy()
     for plant in plants:
@@ -96,7 +108,7 @@ def plant_foot(
     # near the floor would otherwise drag along it.
     depth = -np.einsum("tj,vj->tv", rotation[:, 2], sole_vertices).min(axis=1)
     position[:, 2] = np.maximum(position[:, 2], lift + depth)
-    return position, rotation, lift, contact
+    return position, rotation, lift, contact, lesson
 
 
 def _plants(contact: np.ndarray, free: np.ndarray, sole: float) -> list[_Plant]:
@@ -125,18 +137,22 @@ def _swing_orientation(
     human_rotation: np.ndarray,
     flat: Rotation,
     contact: np.ndarray,
-    standing: np.ndarray,
-) -> Rotation:
-    """The human foot turned by the one offset that best lays it on `flat` over the plants made
-    standing (kneeling, a planted foot may rest on its back); without any, over all plants, and
-    without plants, over the whole clip."""
+    sole: SoleFrames,
+) -> tuple[Rotation, Rotation | None]:
+    """The human foot turned by the one offset that best lays it on `flat` over the plants made in
+    the first of `sole.trusted` that has any (kneeling, a planted foot may rest on its back), and
+    that offset; without any, by the borrowed one, or learnt over all plants, and without plants
+    over the whole clip (then no offset is returned)."""
     human = Rotation.from_matrix(human_rotation)
-    calibration = contact & standing
-    for fallback in (contact, np.ones_like(contact)):
-        if not calibration.any():
-            calibration = fallback
-    offset = (human[calibration].inv() * flat[calibration]).mean()
-    return human * offset
+    for frames in sole.trusted:
+        calibration = contact & frames
+        if calibration.any():
+            offset = (human[calibration].inv() * flat[calibration]).mean()
+            return human * offset, offset
+    if sole.borrowed is not None:
+        return human * sole.borrowed, None
+    calibration = contact if contact.any() else np.ones_like(contact)
+    return human * (human[calibration].inv() * flat[calibration]).mean(), None
 
 
 def _keep_planted_tilt(flat: Rotation, swinging: Rotation, plants: list[_Plant], tilt_limit: float) -> Rotation:

@@ -18,7 +18,7 @@ from rd_pipeline.motion.contact import ContactThresholds, label_contacts
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.body_contact import hold_in_contact, label_body_contacts
 from rd_pipeline.retarget.config import BodyContactConfig, TargetShaping
-from rd_pipeline.retarget.feet import leg_yaw_range, plant_foot
+from rd_pipeline.retarget.feet import SoleFrames, leg_yaw_range, plant_foot
 from rd_pipeline.retarget.frames import frame_from_axes, yaw_and_pitch
 from rd_pipeline.retarget.lafan_joints import FEET, HIPS_LR, KNEES, LOWER_SPINE, PELVIS, SHOULDERS_LR, TOES, TORSO
 from rd_pipeline.retarget.legs import keep_feet_apart, keep_legs_reachable, match_stance_width
@@ -307,28 +307,63 @@ def _plant_feet(
     shape: TargetShaping,
 ) -> np.ndarray:
     """Both feet through `plant_foot`: their targets, orientations and (T, 2) contact labels are
-    replaced in place. Returns the (T, 2) height each sole target clears the floor by."""
+    replaced in place. Returns the (T, 2) height each sole target clears the floor by.
+
+    A foot with no trusted plant to learn its sole on borrows the other foot's lesson."""
     pelvis_yaw = np.unwrap(yaw_and_pitch(orientations[clip.body_for[PELVIS]][:, :, 0])[0])
+    contact = foot_contact.copy()
+    trusted = [SoleFrames((clip.standing, _upright(clip, side, shape))) for side in range(2)]
+    planned = [
+        _plant_one(clip, targets, contact, foot_vertices, pelvis_yaw, side, trusted[side], shape) for side in range(2)
+    ]
+    lessons = [plan[-1] for plan in planned]
+    for side in range(2):
+        borrowed = lessons[1 - side]
+        if lessons[side] is None and borrowed is not None:
+            sole = SoleFrames(trusted[side].trusted, borrowed)
+            planned[side] = _plant_one(clip, targets, contact, foot_vertices, pelvis_yaw, side, sole, shape)
     foot_lift = np.zeros((clip.pos.shape[0], 2))
-    for side, (foot, toe) in enumerate(zip(FEET, TOES)):
-        forward = clip.human(toe) - clip.human(foot)
-        position, rotation, foot_lift[:, side], foot_contact[:, side] = plant_foot(
-            targets[foot],
-            forward,
-            clip.rot[:, clip.index[foot]],
-            foot_contact[:, side],
-            foot_vertices[side],
-            clip.fps,
-            pelvis_yaw,
-            leg_yaw_range(clip.robot, clip.body_for[foot]),
-            0.5 * (clip.human(foot) + clip.human(toe)) * clip.root_scale,
-            clip.standing,
-            shape,
-        )
+    for side, foot in enumerate(FEET):
+        position, rotation, foot_lift[:, side], foot_contact[:, side], _ = planned[side]
         targets[foot] = position
         offset = robot_rest_rotation(clip.robot, clip.body_for[foot])
         orientations[clip.body_for[foot]] = rotation @ offset
     return foot_lift
+
+
+def _plant_one(
+    clip: _Clip,
+    targets: dict[str, np.ndarray],
+    contact: np.ndarray,
+    foot_vertices: tuple[np.ndarray, np.ndarray],
+    pelvis_yaw: np.ndarray,
+    side: int,
+    sole: SoleFrames,
+    shape: TargetShaping,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Rotation | None]:
+    """`plant_foot` on one side, from the labels and targets the chain gave it."""
+    foot = FEET[side]
+    toe = TOES[side]
+    return plant_foot(
+        targets[foot],
+        clip.human(toe) - clip.human(foot),
+        clip.rot[:, clip.index[foot]],
+        contact[:, side],
+        foot_vertices[side],
+        clip.fps,
+        pelvis_yaw,
+        leg_yaw_range(clip.robot, clip.body_for[foot]),
+        0.5 * (clip.human(foot) + clip.human(toe)) * clip.root_scale,
+        sole,
+        shape,
+    )
+
+
+def _upright(clip: _Clip, side: int, shape: TargetShaping) -> np.ndarray:
+    """(T,) the side's knee is higher above its ankle than `upright_shin_fraction` of the shin."""
+    shin = clip.human(KNEES[side]) - clip.human(FEET[side])
+    length = float(np.median(np.linalg.norm(shin, axis=-1)))
+    return shin[:, 2] > shape.upright_shin_fraction * length
 
 
 def _hold_resting_bodies(
