@@ -11,8 +11,8 @@ are motion it has not seen: mirrored, played 1.25 times faster or 0.8 times as f
 work (pelvis below 0.5 m for at least 3 s) cut out of each take so the clip opens lying or
 crawling, and cut the same way out of the mirrored, faster and slower takes (`floor_cut_mirror`,
 `floor_cut_tempo_1.25`, `floor_cut_tempo_0.8`: two perturbations at once; the slower take's
-stretches are longer, its cuts cover other seconds). `--set` changes the retarget params (`typed_config` names: `ik.hold_touchdowns=false`)
-to compare a change on the same rows. `--build-free` scores each robot's build-free copy instead
+stretches are longer, its cuts cover other seconds). `--set` changes the retarget params
+(`typed_config` names: `ik.hold_touchdowns=false`) to compare a change on the same rows. `--build-free` scores each robot's build-free copy instead
 (`bench/retarget_ranges.py`: no range or body volume holds it back), to say how much of a figure
 the robot's build costs; its penetration and self-collision columns read bodies without volume.
 
@@ -42,7 +42,7 @@ import numpy as np
 
 from bench.motion_variants import floor_cuts, mirrored, played_at
 from bench.retarget import resume_log, retarget_and_score, shared_takes
-from bench.retarget_ranges import build_free, widened_ranges, with_g1_leg_ranges
+from bench.retarget_ranges import BUILD_FREE_WIDEN_RAD, build_free, widened_ranges, with_g1_leg_ranges
 from rd_pipeline import paths
 from rd_pipeline.artifacts.stage import typed_config
 from rd_pipeline.errors import PipelineError
@@ -86,8 +86,8 @@ KEPT = (
 """The quality figures a row keeps."""
 BUILD_FREE_NOTE = (
     "Every row is scored on the robot's build-free copy (`--build-free`, `bench/retarget_ranges.py`): G1's leg "
-    "ranges, every range 0.5 rad wider, no body but the feet with any volume. Its penetration and "
-    "self-collision columns read bodies without volume; there are no wider ranges to read."
+    f"ranges, every range {BUILD_FREE_WIDEN_RAD:g} rad wider, no body but the feet with any volume. Its "
+    "penetration and self-collision columns read bodies without volume; there are no wider ranges to read."
 )
 """What the table of a `--build-free` run opens with."""
 
