@@ -1,12 +1,13 @@
 """Benchmark: the frames where a robot's pelvis leaves the scaled human's on floor work, and why.
 
-    python -m bench.pelvis_frames [--robot g1] [--clips "ground2_subject2 145-165 s" ...]
+    python -m bench.pelvis_frames [--robot g1] [--clips "ground2_subject2 145-165 s" "ground2_subject3 x0.8 76-96 s" ...]
                                   [--out bench/results/pelvis_frames_g1]
 
-Each clip (a floor cut of a shared take, `bench/retarget_variants.py`) is retargeted with the
-stage's default params on the robot and on its wider-ranges copy, and scored frame by frame with
-the pelvis ruler of `retarget_quality` (pelvis height against the scaled human's hips, the clip's
-median offset removed; bar 0.10 m). Frames over the bar are grouped into stretches, and each says:
+Each clip (a floor cut of a shared take, plain, mirrored or at another tempo, as
+`bench/retarget_variants.py` names it) is retargeted with the stage's default params on the robot
+and on its wider-ranges copy, and scored frame by frame with the pelvis ruler of
+`retarget_quality` (pelvis height against the scaled human's hips, the clip's median offset
+removed; bar 0.10 m). Frames over the bar are grouped into stretches, and each says:
 
 - how many of its frames the wider-ranges copy brings within the bar (the ranges explain those);
 - of the frames the ranges leave with the robot above the human, how many have a robot body
@@ -28,8 +29,8 @@ and no body but the feet with any volume (each collision geom a point at its cen
 that copy also leaves over the bar is not the robot's build, as far as ranges and volume go: it is
 where the targets and the IK put the pelvis.
 
-The same seconds are then scored inside the whole take, retargeted from its start, with the same
-ruler over those seconds. `<out>.md` is the table, `<out>.json` the numbers.
+The same seconds are then scored inside the whole take (mirrored or played at the cut's tempo
+likewise), retargeted from its start, with the same ruler over those seconds. `<out>.md` is the table, `<out>.json` the numbers.
 """
 
 from __future__ import annotations
@@ -106,16 +107,18 @@ def main() -> None:
 def _report(robot: Robot, name: str) -> dict:
     parts = name.rsplit(" ", 2)
     if len(parts) != 3:
-        raise SystemExit(f"--clips {name!r}: give a floor cut as '<take> <start>-<end> s'")
-    take, span, _ = parts
-    clip = floor_cut(take, name)
+        raise SystemExit(f"--clips {name!r}: give a floor cut as '<take> [mirrored|x<tempo>] <start>-<end> s'")
+    take, *perturbed = parts[0].split(" ")
+    span = parts[1]
+    whole_variant = whole_take_variant(perturbed)
+    clip = floor_cut(take, name, f"floor_cut_{whole_variant}".removesuffix("_plain"))
     own_result = retarget(clip, robot, RetargetConfig())
     own = _scored(robot, own_result)
     wider_robot = _wider_ranges(robot)
     wider = _scored(wider_robot, retarget(clip, wider_robot, RetargetConfig()))
     free_robot = build_free(robot)
     free = pelvis_deviation(free_robot, retarget(clip, free_robot, RetargetConfig()))
-    whole_human = clips(take, "plain")[0][1]
+    whole_human = clips(take, whole_variant)[0][1]
     whole_result = retarget(whole_human, robot, RetargetConfig())
     soles = sole_directions(whole_human, whole_result.targets)
     on_back = planted_on_back(clip, own_result.targets, soles)
@@ -138,6 +141,18 @@ def _report(robot: Robot, name: str) -> dict:
         "whole_take_same_seconds_p95_m": whole,
         "stretches": stretches,
     }
+
+
+def whole_take_variant(perturbed: list[str]) -> str:
+    """The `bench.retarget_variants` variant of the whole take that a floor cut's name says it was
+    cut from (`perturbed`: the words between the take and the seconds)."""
+    if not perturbed:
+        return "plain"
+    if perturbed == ["mirrored"]:
+        return "mirror"
+    if len(perturbed) == 1 and perturbed[0].startswith("x"):
+        return f"tempo_{perturbed[0].removeprefix('x')}"
+    raise PipelineError(f"'{' '.join(perturbed)}' names no perturbation (mirrored, x<tempo>)")
 
 
 def _causes(own: _Scored, wider: _Scored, on_back: np.ndarray) -> np.ndarray:

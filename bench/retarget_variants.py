@@ -163,10 +163,10 @@ def clips(take: str, variant: str) -> list[tuple[str, HumanMotion]]:
     raise PipelineError(f"no variant '{variant}' (the variants: {', '.join(VARIANTS)})")
 
 
-def floor_cut(take: str, name: str) -> HumanMotion:
-    """The floor cut of `take` that `clips` names `name`; one it does not make stops in one line
-    naming the cuts there are."""
-    cuts = dict(clips(take, "floor_cut"))
+def floor_cut(take: str, name: str, variant: str = "floor_cut") -> HumanMotion:
+    """The floor cut of `take` that `clips` names `name` among the cuts of `variant`; one it does
+    not make stops in one line naming the cuts there are."""
+    cuts = dict(clips(take, variant))
     if name not in cuts:
         raise PipelineError(f"'{name}' is not a floor cut of {take} (its cuts: {', '.join(cuts) or 'none'})")
     return cuts[name]

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.pelvis_frames import planted_on_back, sole_directions
+from bench.pelvis_frames import planted_on_back, sole_directions, whole_take_variant
 from bench.retarget_ranges import BUILD_FREE_WIDEN_RAD, build_free
 from bench.retarget_variants import clips, floor_cut
 from rd_pipeline.errors import PipelineError
@@ -81,3 +81,16 @@ def test_the_build_free_copy_has_no_volume_but_the_feet_and_wider_ranges(g1: Rob
         copy.jnt_range[ankle], h1.model.jnt_range[ankle] + [-BUILD_FREE_WIDEN_RAD, BUILD_FREE_WIDEN_RAD]
     )
     assert h1.model.jnt_range[knee][1] == pytest.approx(2.05, abs=0.01)
+
+
+@pytest.mark.parametrize("variant", ["floor_cut", "floor_cut_mirror", "floor_cut_tempo_0.8"])
+def test_a_floor_cut_name_says_which_take_it_was_cut_from(variant: str) -> None:
+    name, _ = clips("ground2_subject2", variant)[0]
+    take, *perturbed = name.rsplit(" ", 2)[0].split(" ")
+    assert take == "ground2_subject2"
+    assert f"floor_cut_{whole_take_variant(perturbed)}".removesuffix("_plain") == variant
+
+
+def test_a_cut_name_with_an_unknown_perturbation_stops_in_one_line() -> None:
+    with pytest.raises(PipelineError, match=r"^'upside down' names no perturbation \(mirrored, x<tempo>\)$"):
+        whole_take_variant(["upside", "down"])
