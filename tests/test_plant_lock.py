@@ -1,9 +1,11 @@
 """The plant lock on the G1 model: a planted foot stays over where it landed under a pelvis that
 jitters, at the height the earlier passes gave it, slides no farther than it must under a pelvis
-that runs away, and lets go when it lifts."""
+that runs away, and lets go when it lifts; on legs that cannot move, the pelvis gives instead."""
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 from collections.abc import Callable
 
 import numpy as np
@@ -26,6 +28,16 @@ def _standing(robot: Robot, frames: int) -> np.ndarray:
 
 def _lock(robot: Robot, qpos: np.ndarray, contact: np.ndarray) -> np.ndarray:
     return lock_plants(robot, qpos, contact, FPS, PlantLockConfig(), IkConfig())
+
+
+def _stiff_legged(robot: Robot) -> Robot:
+    """A copy of `robot` whose leg joints can move a milliradian from the default pose: a leg at
+    its stops, which cannot hold its foot."""
+    model = copy.deepcopy(robot.model)
+    for name, angle in zip(robot.config.joint_names, robot.config.default_pos):
+        if "hip" in name or "knee" in name or "ankle" in name:
+            model.jnt_range[model.joint(name).id] = (angle - 0.001, angle + 0.001)
+    return dataclasses.replace(robot, model=model)
 
 
 def test_a_planted_foot_stays_put_under_a_jittering_pelvis(
@@ -97,3 +109,22 @@ def test_a_lifted_foot_is_released_over_the_release_time(
     assert np.linalg.norm(after[29, 0] - after[0, 0]) < 0.001
     assert np.linalg.norm(after[30 + release :, 0] - before[30 + release :, 0], axis=-1).max() < 0.0005
     assert np.linalg.norm(after[30:, 1] - after[0, 1], axis=-1).max() < 0.001
+
+
+def test_where_the_legs_cannot_hold_the_feet_the_pelvis_gives(
+    g1: Robot, foot_positions: Callable[[Robot, np.ndarray], np.ndarray]
+) -> None:
+    """The pelvis sways 1 cm sideways over two seconds on legs that cannot move: the legs alone
+    let the feet sway with it; with the pelvis's give the feet stay within 2 mm of where they
+    landed, and the pelvis stays put."""
+    stiff = _stiff_legged(g1)
+    qpos = _standing(stiff, 100)
+    qpos[:, 1] += 0.01 * np.sin(np.arange(100) * np.pi / 50.0)
+    contact = np.ones((100, 2), dtype=bool)
+    legs_alone = dataclasses.replace(PlantLockConfig(), pelvis_give_m=0.0)
+    swayed = foot_positions(stiff, lock_plants(stiff, qpos, contact, FPS, legs_alone, IkConfig()))
+    given = lock_plants(stiff, qpos, contact, FPS, PlantLockConfig(), IkConfig())
+    held = foot_positions(stiff, given)
+    assert np.abs(swayed[..., 1] - swayed[0, :, 1]).max() > 0.009
+    assert np.abs(held[..., 1] - held[0, :, 1]).max() < 0.002
+    assert np.abs(given[:, 1] - given[0, 1]).max() < 0.002

@@ -245,11 +245,21 @@ class PlantLockConfig:
     """After a foot lifts, seconds over which the hold eases off."""
     max_step_rad: float = 0.2
     """Largest change of any leg joint in one step."""
+    pelvis_give_m: float = 0.01
+    """Where a leg cannot hold its planted foot (a joint at its stop), how far (m, each horizontal
+    axis) the pelvis may move from the earlier passes' to hold it (0: the legs alone). H1's ankle
+    has one joint and stops the leg on floor work; the whole robot moves instead."""
+    pelvis_give_smoothing_s: float = 0.04
+    """Gaussian sigma (s) of the pelvis's gives: smoothed into one motion of the pelvis, under
+    which the legs hold the feet again, so the pelvis does not shake frame by frame."""
     step_halvings: int = 2
     """A step that takes the feet farther from their points is halved up to this many times."""
 
     def __post_init__(self) -> None:
-        require_positive(self, "tolerance_m", "damping", "reach_m", "slip_m", "release_s", "max_step_rad")
+        require_positive(
+            self, "tolerance_m", "damping", "reach_m", "slip_m", "release_s", "max_step_rad", "pelvis_give_smoothing_s"
+        )
+        require_non_negative(self, "pelvis_give_m")
 
 
 @dataclass(frozen=True)

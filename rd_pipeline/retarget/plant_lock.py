@@ -3,9 +3,11 @@
 The refinements before this pass trade the planted foot against a posture and a pelvis that
 move: on floor work the foot stays within millimetres of its target but jitters about it, and
 the skate ruler reads that jitter as sliding. Here a foot that lands is held, frame by frame, over
-the point where it landed, by a few damped least-squares steps of that leg's joints alone. Where
-the leg cannot reach the point (a range limit, a velocity limit) the foot slides only as far as
-it must, and is held from there on.
+the point where it landed, by a few damped least-squares steps of that leg's joints. Where the
+leg cannot hold it (a joint at its stop: on floor work, H1's one-joint ankle), the pelvis gives a
+little sideways as well; the gives are smoothed into one motion of the pelvis and the legs hold
+the feet again under it. Where even that cannot reach the point (a range limit, a velocity
+limit) the foot slides only as far as it must, and is held from there on.
 
 Only the horizontal position is held, which is what slides; the foot's height stays the earlier
 passes', which kept every body above the floor. A foot that rolls over on the floor (from its sole
@@ -15,10 +17,12 @@ lifted back out of the floor afterwards (`docs/studies/floor_work.md`, stage 25)
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 
 from rd_pipeline.retarget.collision import eased_until_clear
 from rd_pipeline.retarget.config import IkConfig, PlantLockConfig
@@ -47,9 +51,34 @@ def lock_plants(
     """`qpos` (T, nq) with every planted foot (`contact` (T, 2), one column per foot body) held
     where it landed. Joints stay within the retarget range and within `ik`'s share of their
     velocity limits from the previous frame; no body pair goes deeper than `ik`'s hard limit where
-    `qpos` kept it clear."""
+    `qpos` kept it clear.
+
+    Where a leg cannot hold its foot (a joint at its stop), the pelvis gives up to
+    `settings.pelvis_give_m` sideways; the gives are smoothed into one shift of the pelvis, and
+    the legs hold the feet again under it."""
     if settings.iterations == 0:
         return qpos
+    held, gave = _hold_plants(robot, qpos, contact, fps, settings, ik, settings.pelvis_give_m)
+    if gave.any():
+        sigma = settings.pelvis_give_smoothing_s * fps
+        shift = gaussian_filter1d(held[:, :2] - qpos[:, :2], sigma, axis=0, mode="nearest")
+        moved = qpos.copy()
+        moved[:, :2] += shift
+        held, _ = _hold_plants(robot, moved, contact, fps, settings, ik, give_m=0.0)
+    return clear_pairs(robot, qpos, held, ik.pair_depth_limit_m)
+
+
+def _hold_plants(
+    robot: Robot,
+    qpos: np.ndarray,
+    contact: np.ndarray,
+    fps: float,
+    settings: PlantLockConfig,
+    ik: IkConfig,
+    give_m: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """`qpos` with the planted feet held, frame by frame, and (T,) the frames where the pelvis
+    moved (up to `give_m` sideways) because a leg could not hold its foot."""
     model = robot.model
     data = mujoco.MjData(model)
     feet = [robot.body_ids[foot] for foot in robot.config.foot_bodies]
@@ -61,6 +90,7 @@ def lock_plants(
     joints = robot.qpos_indices
     holds: list[_Hold | None] = [None] * len(feet)
     out = qpos.copy()
+    gave = np.zeros(len(qpos), dtype=bool)
     for t in range(len(qpos)):
         low = lower
         high = upper
@@ -70,17 +100,25 @@ def lock_plants(
             low = np.maximum(lower, out[t - 1, joints] - max_step)
             high = np.minimum(upper, out[t - 1, joints] + max_step)
             out[t, joints] = np.clip(out[t, joints], low, high)
+        goals = {}
         for k in range(len(feet)):
             holds[k] = _update_hold(holds[k], bool(contact[t, k]), free[t, k], release)
             hold = holds[k]
-            if hold is None:
-                continue
-            goal = _goal(hold, free[t, k], release, settings.reach_m)
-            reached = reach(robot, data, out[t], goal, feet[k], chains[k], (low, high), settings)
+            if hold is not None:
+                goals[k] = _goal(hold, free[t, k], release, settings.reach_m)
+        reached = {
+            k: reach(robot, data, out[t], goal, feet[k], chains[k], (low, high), settings) for k, goal in goals.items()
+        }
+        short = [k for k in goals if contact[t, k] and _horizontal(reached[k] - goals[k]) > settings.slip_m]
+        if short and give_m > 0:
+            pelvis = (qpos[t, :2] - give_m, qpos[t, :2] + give_m)
+            reached = _reach_with_pelvis(robot, data, out[t], goals, chains, (low, high), pelvis, settings)
+            gave[t] = True
+        for k, hold in enumerate(holds):
             # Out of reach, the foot slides as far as it must and is held from there.
-            if contact[t, k] and np.linalg.norm((reached - hold.point)[:2]) > settings.slip_m:
-                hold.point = reached
-    return clear_pairs(robot, qpos, out, ik.pair_depth_limit_m)
+            if hold is not None and contact[t, k] and _horizontal(reached[k] - hold.point) > settings.slip_m:
+                hold.point = reached[k]
+    return out, gave
 
 
 def leg_chains(robot: Robot) -> list[np.ndarray]:
@@ -143,42 +181,121 @@ def reach(
     turn: Turn | None = None,
 ) -> np.ndarray:
     """Move the leg `joints` of `q` (in place) towards putting `foot` on `goal`, and turned as
-    `turn` says when given, within `bounds`; a step that leaves the foot farther from its goal is
-    halved, then not taken. Returns where the foot ends."""
+    `turn` says when given, within `bounds`. Returns where the foot ends."""
     model = robot.model
     jacobian = np.zeros((3 if turn is None else 6, model.nv))
-    columns = robot.qpos_indices[joints]
-    limits = (bounds[0][joints], bounds[1][joints])
-    error = _goal_error(model, data, q, goal, foot, turn)
-    best = float(np.linalg.norm(error))
-    for _ in range(settings.iterations):
-        if best < settings.tolerance_m:
-            break
-        mujoco.mj_comPos(model, data)
+
+    def error(trial: np.ndarray) -> np.ndarray:
+        return _goal_error(model, data, trial, goal, foot, turn)
+
+    def foot_jacobian() -> np.ndarray:
         if turn is None:
             mujoco.mj_jacBody(model, data, jacobian, None, foot)
         else:
             mujoco.mj_jacBody(model, data, jacobian[:3], jacobian[3:], foot)
             jacobian[3:] *= turn.weight_m
-        jac = jacobian[:, robot.dof_indices[joints]]
+        return jacobian
+
+    columns = _Columns(robot.qpos_indices[joints], robot.dof_indices[joints], bounds[0][joints], bounds[1][joints])
+    _descend(model, data, q, columns, error, foot_jacobian, settings)
+    data.qpos[:] = q
+    mujoco.mj_kinematics(model, data)
+    return data.xpos[foot].copy()
+
+
+def _reach_with_pelvis(
+    robot: Robot,
+    data: mujoco.MjData,
+    q: np.ndarray,
+    goals: dict[int, np.ndarray],
+    chains: list[np.ndarray],
+    bounds: tuple[np.ndarray, np.ndarray],
+    pelvis: tuple[np.ndarray, np.ndarray],
+    settings: PlantLockConfig,
+) -> dict[int, np.ndarray]:
+    """Move both legs and the pelvis's horizontal position of `q` (in place) towards putting each
+    foot of `goals` (foot index -> goal) on its goal, the legs within `bounds`, the pelvis within
+    `pelvis` (low, high). Returns where each foot ends."""
+    model = robot.model
+    feet = [robot.body_ids[robot.config.foot_bodies[k]] for k in goals]
+    targets = np.concatenate(list(goals.values()))
+    legs = np.concatenate([chains[k] for k in goals])
+    jacobian = np.zeros((3, model.nv))
+
+    def positions(trial: np.ndarray) -> np.ndarray:
+        data.qpos[:] = trial
+        mujoco.mj_kinematics(model, data)
+        return data.xpos[feet].ravel()
+
+    def feet_jacobian() -> np.ndarray:
+        rows = []
+        for foot in feet:
+            mujoco.mj_jacBody(model, data, jacobian, None, foot)
+            rows.append(jacobian.copy())
+        return np.vstack(rows)
+
+    # The floating base's first two position coordinates and velocity dofs are its horizontal
+    # position in the world.
+    columns = _Columns(
+        np.concatenate([[0, 1], robot.qpos_indices[legs]]),
+        np.concatenate([[0, 1], robot.dof_indices[legs]]),
+        np.concatenate([pelvis[0], bounds[0][legs]]),
+        np.concatenate([pelvis[1], bounds[1][legs]]),
+    )
+    _descend(model, data, q, columns, lambda trial: targets - positions(trial), feet_jacobian, settings)
+    ends = positions(q).reshape(-1, 3)
+    return {k: ends[i].copy() for i, k in enumerate(goals)}
+
+
+@dataclass(frozen=True)
+class _Columns:
+    """The coordinates of a configuration a descent moves, and their bounds."""
+
+    qpos: np.ndarray
+    dofs: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+
+
+def _descend(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    q: np.ndarray,
+    columns: _Columns,
+    error: Callable[[np.ndarray], np.ndarray],
+    jacobian: Callable[[], np.ndarray],
+    settings: PlantLockConfig,
+) -> None:
+    """Damped least-squares steps of `columns` of `q` (in place) towards a zero `error(q)`, whose
+    `jacobian()` is read in the pose `data` holds; a step that leaves the error larger is halved,
+    then not taken."""
+    residual = error(q)
+    best = float(np.linalg.norm(residual))
+    for _ in range(settings.iterations):
+        if best < settings.tolerance_m:
+            break
+        mujoco.mj_comPos(model, data)
+        jac = jacobian()[:, columns.dofs]
         trial = q.copy()
-        trial[columns] = _bounded_step(jac, error, q[columns], limits, settings)
-        trial_error = _goal_error(model, data, trial, goal, foot, turn)
-        distance = float(np.linalg.norm(trial_error))
+        trial[columns.qpos] = _bounded_step(jac, residual, q[columns.qpos], (columns.low, columns.high), settings)
+        trial_residual = error(trial)
+        distance = float(np.linalg.norm(trial_residual))
         for _ in range(settings.step_halvings):
             if distance < best:
                 break
             trial = 0.5 * (q + trial)
-            trial_error = _goal_error(model, data, trial, goal, foot, turn)
-            distance = float(np.linalg.norm(trial_error))
+            trial_residual = error(trial)
+            distance = float(np.linalg.norm(trial_residual))
         if distance >= best:
             break
         q[:] = trial
         best = distance
-        error = trial_error
-    data.qpos[:] = q
-    mujoco.mj_kinematics(model, data)
-    return data.xpos[foot].copy()
+        residual = trial_residual
+
+
+def _horizontal(offset: np.ndarray) -> float:
+    """The horizontal length of `offset`."""
+    return float(np.linalg.norm(offset[:2]))
 
 
 def _goal_error(
