@@ -1,5 +1,6 @@
 """Feet that travel between plants, on the G1 model: a foot dragged over the floor is lifted
-straight up by its leg, while a planted foot, a still foot and the rest of the pose stay."""
+straight up by its leg, and so is one on the frame it lands still travelling, while a planted
+foot, a still foot and the rest of the pose stay."""
 
 from __future__ import annotations
 
@@ -92,3 +93,19 @@ def test_no_clearance_leaves_the_motion_as_it_is(g1: Robot) -> None:
 def test_a_negative_clearance_is_refused_by_name() -> None:
     with pytest.raises(ParamRangeError, match="clearance_m"):
         MovingFootClearance(clearance_m=-0.01)
+
+
+def test_a_foot_that_lands_travelling_comes_down_from_above(g1: Robot) -> None:
+    """The left foot lands at frame 20 while the robot glides on: on its landing frame it is
+    still in the air (it comes down on its plant instead of sliding into it), and from the next
+    frame on it is left to the plant."""
+    qpos = _gliding(g1, 0.3)
+    contact = np.zeros((FRAMES, 2), dtype=bool)
+    contact[20:, 0] = True
+    contact[:, 1] = True
+    landed = _soles(g1, _lift(g1, qpos, contact))
+    slid_in = _soles(g1, _lift(g1, qpos, contact, land_from_above=False))
+    clearance = MovingFootClearance().clearance_m
+    assert landed[20, 0] > clearance - 0.001
+    assert slid_in[20, 0] < 0.006
+    assert landed[21:, 0].max() < 0.006

@@ -3,7 +3,8 @@
 The robot's foot trails a fast swing target, so it reaches the floor while it still travels to
 where it will be held, and leaves the floor after it has started to travel: for those frames it is
 dragged over the floor. Here such a foot is lifted, by its leg's joints alone, until its lowest
-point clears the floor; where it travels stays as it was.
+point clears the floor; where it travels stays as it was. So is a foot still travelling on the
+first frame of its plant: it comes down on the plant a frame later, from above.
 """
 
 from __future__ import annotations
@@ -46,12 +47,23 @@ def lift_moving_feet(
     for _ in range(settings.passes):
         soles, xy = _soles_and_xy(model, data, out, feet, meshes)
         speed = np.linalg.norm(np.gradient(xy, 1.0 / fps, axis=0), axis=-1)
-        dragged = (soles < settings.clearance_m) & (speed > settings.speed_m_s) & ~contact.astype(bool)
+        airborne = ~contact.astype(bool)
+        if settings.land_from_above:
+            airborne |= _landings(contact)
+        dragged = (soles < settings.clearance_m) & (speed > settings.speed_m_s) & airborne
         for t, k in np.argwhere(dragged):
             bounds = _bounds(robot, out, t, max_step)
             path = xy[max(t - 1, 0), k], xy[min(t + 1, len(out) - 1), k]
             out[t] = _lifted(robot, data, out[t], legs[k], bounds, path, settings, lock)
     return clear_pairs(robot, qpos, out, ik.pair_depth_limit_m)
+
+
+def _landings(contact: np.ndarray) -> np.ndarray:
+    """(T, feet) the first frame of each plant after a swing."""
+    planted = contact.astype(bool)
+    out = np.zeros_like(planted)
+    out[1:] = planted[1:] & ~planted[:-1]
+    return out
 
 
 @dataclass(frozen=True)
