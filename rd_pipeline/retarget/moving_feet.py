@@ -44,12 +44,12 @@ def lift_moving_feet(
     out = qpos.copy()
     # A lift that turns the foot a little moves it sideways, and a neighbouring frame on the
     # floor then travels: such frames are lifted in the next pass.
+    airborne = ~contact.astype(bool)
+    if settings.land_from_above:
+        airborne |= _landings(contact)
     for _ in range(settings.passes):
         soles, xy = _soles_and_xy(model, data, out, feet, meshes)
         speed = np.linalg.norm(np.gradient(xy, 1.0 / fps, axis=0), axis=-1)
-        airborne = ~contact.astype(bool)
-        if settings.land_from_above:
-            airborne |= _landings(contact)
         dragged = (soles < settings.clearance_m) & (speed > settings.speed_m_s) & airborne
         for t, k in np.argwhere(dragged):
             bounds = _bounds(robot, out, t, max_step)

@@ -112,7 +112,7 @@ def _hold_plants(
         short = [k for k in goals if contact[t, k] and _horizontal(reached[k] - goals[k]) > settings.slip_m]
         if short and give_m > 0:
             pelvis = (qpos[t, :2] - give_m, qpos[t, :2] + give_m)
-            reached = _reach_with_pelvis(robot, data, out[t], goals, chains, (low, high), pelvis, settings)
+            reached = _reach_with_pelvis(robot, data, out[t], goals, feet, chains, (low, high), pelvis, settings)
             gave[t] = True
         for k, hold in enumerate(holds):
             # Out of reach, the foot slides as far as it must and is held from there.
@@ -208,16 +208,18 @@ def _reach_with_pelvis(
     data: mujoco.MjData,
     q: np.ndarray,
     goals: dict[int, np.ndarray],
+    foot_bodies: list[int],
     chains: list[np.ndarray],
     bounds: tuple[np.ndarray, np.ndarray],
     pelvis: tuple[np.ndarray, np.ndarray],
     settings: PlantLockConfig,
 ) -> dict[int, np.ndarray]:
     """Move both legs and the pelvis's horizontal position of `q` (in place) towards putting each
-    foot of `goals` (foot index -> goal) on its goal, the legs within `bounds`, the pelvis within
-    `pelvis` (low, high). Returns where each foot ends."""
+    foot of `goals` (foot index -> goal) on its goal, the legs (`chains`, one per foot body of
+    `foot_bodies`) within `bounds`, the pelvis within `pelvis` (low, high). Returns where each
+    foot ends."""
     model = robot.model
-    feet = [robot.body_ids[robot.config.foot_bodies[k]] for k in goals]
+    feet = [foot_bodies[k] for k in goals]
     targets = np.concatenate(list(goals.values()))
     legs = np.concatenate([chains[k] for k in goals])
     jacobian = np.zeros((3, model.nv))
