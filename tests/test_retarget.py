@@ -201,7 +201,7 @@ def test_frames_visited_backward_get_their_own_task_costs() -> None:
     targets = ik.targets
     changes = np.flatnonzero(np.any(ik.position_costs[1:] != ik.position_costs[:-1], axis=(1, 2)))
     assert len(changes) >= 2, "the excerpt should switch feet between planted and swinging"
-    q = ik.initial_configuration()
+    q = ik.initial_configuration(ik.start_postures[0])
     for t in reversed(range(targets.n_frames)):
         q = ik.solve_frame(t, q, ik.root_steps[t], np.inf)
         held = ik.key_bodies.body_costs[:, :3]

@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
-from rd_pipeline.retarget.config import LagRepair, RetargetConfig
+from rd_pipeline.retarget.config import IkConfig, LagRepair, RetargetConfig
 from rd_pipeline.retarget.quality import FootMeshes, quality_series, summarize_quality
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.retarget.targets import build_targets
@@ -129,9 +129,16 @@ def test_a_stretch_stuck_on_the_wrong_branch_is_solved_again() -> None:
     """Solved from 61 s of ground2, where the human is down on hands and feet, the forward IK starts
     from the standing default pose and stays bent over it for about a second (pelvis far above the
     scaled hips); solved backward from where it has caught up, the stretch is not. With the lag
-    repair off the ruler sees it, with it on the bars hold."""
+    repair off the ruler sees it, with it on the bars hold. (The clip's own start tries folded knees
+    too, and starts from them: here it may only stand.)"""
     human = _excerpt("ground2_subject2", 61.0, 70.0)
-    unrepaired, repaired = _with_repairs(human, "g1", LagRepair(error_ratio=0.0), LagRepair())
+    standing = IkConfig(start_knee_bends=(0.0,))
+    unrepaired, repaired = _figures(
+        human,
+        "g1",
+        RetargetConfig(ik=standing, repair=LagRepair(error_ratio=0.0)),
+        RetargetConfig(ik=standing),
+    )
     assert unrepaired[0] == 0 and repaired[0] >= 1
     assert unrepaired[1]["pelvis_height_dev_p95_m"] > 0.15
     assert repaired[1]["pelvis_height_dev_p95_m"] <= 0.10
@@ -163,14 +170,33 @@ def test_a_robot_left_lying_while_the_human_sits_up_is_repaired_by_the_stronger_
 
 def _with_repairs(human: HumanMotion, robot_name: str, *repairs: LagRepair) -> list[tuple[int, dict]]:
     """Per lag repair: the windows it re-solved and the ruler's figures of the retarget."""
+    configs = [dataclasses.replace(RetargetConfig(), repair=repair) for repair in repairs]
+    return _figures(human, robot_name, *configs)
+
+
+def _figures(human: HumanMotion, robot_name: str, *configs: RetargetConfig) -> list[tuple[int, dict]]:
+    """Per config: the windows the lag repair re-solved and the ruler's figures of the retarget."""
     robot = load_robot(robot_name)
     figures = []
-    for repair in repairs:
-        result = retarget(human, robot, dataclasses.replace(RetargetConfig(), repair=repair))
+    for config in configs:
+        result = retarget(human, robot, config)
         targets = result.targets
         series = quality_series(robot, result.reference, targets.positions, targets.bodies, targets.human_pelvis)
         figures.append((result.repaired_windows, summarize_quality(robot, result.reference, series)))
     return figures
+
+
+def test_a_clip_that_opens_kneeling_starts_from_folded_knees() -> None:
+    """G1 on ground2_subject3 61-65 s: the performer kneels and sits back. From the standing default
+    the first frame kneels upright with the hips thrown back and the robot stays on that branch,
+    its pelvis a quarter metre over the sitting human's; tried from folded knees as well, the
+    clip starts there and sits on its heels."""
+    human = _excerpt("ground2_subject3", 61.0, 65.0)
+    standing = dataclasses.replace(RetargetConfig(), ik=IkConfig(start_knee_bends=(0.0,)))
+    (_, from_standing), (_, from_best) = _figures(human, "g1", standing, RetargetConfig())
+    assert from_standing["pelvis_height_dev_p95_m"] > 0.12
+    assert from_best["pelvis_height_dev_p95_m"] < 0.08
+    assert from_best["keypoint_error_mean_mm"] < from_standing["keypoint_error_mean_mm"]
 
 
 def test_a_body_sliding_on_the_floor_keeps_its_targets_together() -> None:

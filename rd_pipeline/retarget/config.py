@@ -149,7 +149,16 @@ class IkConfig:
     iterations: int = 2
     """Solver iterations per frame (warm started from the previous frame)."""
     first_frame_iterations: int = 50
-    """Solver iterations of the first frame, which starts from the default pose."""
+    """Solver iterations of the first frame, which starts from one of `start_knee_bends`."""
+    start_knee_bends: tuple[float, ...] = (0.0, 0.85)
+    """Postures the first frame starts from: the default pose with each knee moved this fraction of
+    the way to its flexion end (0: the default pose). The IK keeps the branch its first frame lands
+    on: G1's cut of ground2_subject3 at 0.8x from 76 s, where the performer kneels and sits back,
+    knelt upright from the default pose, its hips thrown back, 0.2 m above the sitting human for
+    a second (pelvis p95 0.121 m); started with folded knees it sits on its heels (0.071)."""
+    start_trial_s: float = 2.0
+    """Seconds solved from each starting posture; the clip starts from the one whose stretch has
+    the lowest mean keypoint error (the first on a tie)."""
     solver: str = "daqp"
     """QP solver name (qpsolvers)."""
     velocity_margin: float = 0.95
@@ -223,6 +232,13 @@ class IkConfig:
     """Gaussian sigma (s) of the pelvis moves that `pelvis_slack_m` allows."""
     lm_damping: float = 1.0
     """Error-scaled damping of the frame tasks: keeps the solve calm near singular arms and legs."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "start_trial_s")
+        if not self.start_knee_bends or not all(0.0 <= bend <= 1.0 for bend in self.start_knee_bends):
+            raise ParamRangeError(
+                "start_knee_bends", f"must be one or more fractions in [0, 1], got {self.start_knee_bends}"
+            )
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ from rd_pipeline.retarget.collision import collision_limit
 from rd_pipeline.retarget.config import IkConfig, IkWeights
 from rd_pipeline.retarget.floor import FloorLimit
 from rd_pipeline.retarget.limits import FrameStepLimit
+from rd_pipeline.retarget.start_postures import start_postures
 from rd_pipeline.retarget.targets import RetargetTargets
 from rd_pipeline.retarget.tasks import key_bodies_task, position_cost_schedule, posture_task, target_poses
 from rd_pipeline.robots import Robot
@@ -72,12 +73,13 @@ class RetargetIk:
         self.damping = weights.damping
         self.key_body_ids = np.array(self.key_bodies.body_ids)
         self.target_poses = target_poses(targets)
+        self.start_postures = start_postures(robot, settings.start_knee_bends)
 
-    def initial_configuration(self) -> np.ndarray:
-        """Default pose placed at the first frame's pelvis target."""
+    def initial_configuration(self, joints: np.ndarray) -> np.ndarray:
+        """The posture `joints` (config order) placed at the first frame's pelvis target."""
         q = np.zeros(self.robot.model.nq)
         q[3] = 1.0
-        q[self.robot.qpos_indices] = self.robot.config.default_pos
+        q[self.robot.qpos_indices] = joints
         root = self.targets.bodies.index(self.robot.config.root_body)
         q[:3] = self.targets.positions[0, root]
         rotation = self.targets.orientations.get(self.robot.config.root_body)
@@ -272,10 +274,29 @@ class RetargetIk:
         return q
 
     def solve(self, frames: Iterable[int]) -> np.ndarray:
-        """(T, nq) configurations, frame by frame; rows of frames not visited are NaN."""
+        """(T, nq) configurations, frame by frame from the best start (`best_start`); rows of
+        frames not visited are NaN."""
+        return self._solve_from(self.best_start(), frames)
+
+    def best_start(self) -> np.ndarray:
+        """Of the start postures placed at the first frame, the one whose first `start_trial_s`
+        solved fit the targets best (lowest mean keypoint error; the first on a tie)."""
+        starts = [self.initial_configuration(joints) for joints in self.start_postures]
+        if len(starts) == 1:
+            return starts[0]
+        trial = range(min(self.targets.n_frames, max(1, round(self.settings.start_trial_s * self.targets.fps))))
+        errors = [self._trial_error(start, trial) for start in starts]
+        return starts[int(np.argmin(errors))]
+
+    def _trial_error(self, start: np.ndarray, frames: range) -> float:
+        """Mean keypoint error of `frames` solved from `start`."""
+        solved = self._solve_from(start, frames)[frames.start : frames.stop]
+        return float(self.keypoint_errors(solved, frames.start).mean())
+
+    def _solve_from(self, start: np.ndarray, frames: Iterable[int]) -> np.ndarray:
         targets = self.targets
         out = np.full((targets.n_frames, self.robot.model.nq), np.nan)
-        self.configuration.update(self.initial_configuration())
+        self.configuration.update(start)
         previous = None
         window = max(1, round(self.settings.catch_up_window_s * targets.fps))
         recent: deque[float] = deque(maxlen=window)
@@ -293,7 +314,7 @@ class RetargetIk:
         return out
 
     def _solve_first_frame(self, t: int) -> np.ndarray:
-        """The first frame places the robot from its default pose: the root may go anywhere, and it
+        """The first frame places the robot from its start posture: the root may go anywhere, and it
         gets more iterations to converge."""
         self._set_frame_targets(t)
         self.step_limit.start_frame(None, np.full(6, np.inf))
