@@ -100,9 +100,13 @@ class IkWeights:
     swinging foot's cost changes, and the QP's damping."""
 
     root_position: float = 15.0
-    """Pelvis position along its forward and left axes."""
+    """Pelvis position along its forward and left axes, where they lie level."""
     root_height: float = 50.0
-    """Pelvis position along its up axis."""
+    """Pelvis height: along its own up axis and along the axis of its target that stands upright
+    (`tasks._root_costs`). Along its own up axis alone, a performer sitting back or crawling, hips
+    tipped 60 degrees, had its height weighed at about half this: H1 kept its pelvis 0.2-0.25 m
+    over the scaled hips on the floor cuts of ground2 (ground2_subject2 at 0.8x, 93-113 s: pelvis
+    p95 0.256 m; 0.094 held along the vertical too)."""
     root_orientation: float = 5.0
     """Pelvis orientation."""
     torso_orientation: float = 3.0
@@ -332,9 +336,11 @@ class LagRepair:
     guide_costs: tuple[float, ...] = (1.0, 4.0)
     """Posture costs pulling the re-solve towards the frame's better solution: the stretch is
     re-solved at each, and the one with the lowest mean keypoint error over the stretch is kept.
-    No one cost suits every stretch: at 1, H1 ground2_subject2 75-95 s slid back onto the lying
-    branch while the performer sat up (pelvis p95 0.285 m; 0.146 at 4); at 4, G1 ground2_subject2
-    61-70 s followed the backward solve frame by frame onto a worse stretch (0.080 -> 0.130)."""
+    No one cost suited every stretch at stage 24: at 1, H1 ground2_subject2 75-95 s slid back onto
+    the lying branch while the performer sat up (pelvis p95 0.285 m; 0.146 at 4); at 4, G1
+    ground2_subject2 61-70 s followed the backward solve frame by frame onto a worse stretch
+    (0.080 -> 0.130). Since the pelvis is held to its height along the vertical (stage 30), neither
+    stretch needs the choice."""
     rejoin_s: float = 0.5
     """After the stretch, seconds over which the re-solve is guided back to and cross-faded into the
     first solution, so the splice is continuous."""

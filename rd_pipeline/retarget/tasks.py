@@ -157,14 +157,14 @@ def position_cost_schedule(targets: RetargetTargets, config: RobotConfig, weight
 
     Planted feet must not slide; swinging feet only guide the leg sideways, so the body follows the
     pelvis rather than a foot it cannot reach. Bodies resting on the floor are held like planted feet.
-    Along the pelvis' own up axis the cost is higher: sinking is the cheapest way out of a conflict
-    between the feet and the legs, and it reads as a collapse.
+    In height the pelvis is held more closely than across (`_root_costs`): sinking is the
+    cheapest way out of a conflict between the feet and the legs, and it reads as a collapse.
     """
     n_frames = targets.n_frames
     costs = np.full((n_frames, len(targets.bodies), 3), weights.limb_position)
     costs[targets.body_contact] = weights.contact_position
     root = targets.bodies.index(config.root_body)
-    costs[:, root] = [weights.root_position, weights.root_position, weights.root_height]
+    costs[:, root] = _root_costs(targets, config, weights)
     resting = targets.body_contact[:, root]
     costs[resting, root] = np.maximum(costs[resting, root], weights.contact_position)
     for side, foot in enumerate(config.foot_bodies):
@@ -179,3 +179,20 @@ def position_cost_schedule(targets: RetargetTargets, config: RobotConfig, weight
         # target does instead of dragging along it.
         costs[:, k, 2] = weights.feet_position
     return costs
+
+
+def _root_costs(targets: RetargetTargets, config: RobotConfig, weights: IkWeights) -> np.ndarray:
+    """(T, 3) pelvis position cost along its own axes: `root_height` along its up axis and along
+    whichever axis of its target stands upright, `root_position` along the others.
+
+    A tilted axis gets the part of `root_height` its vertical component's square gives it (the
+    axes' squares sum to one). Held by its own up axis alone, a pelvis tipped by sitting back or
+    crawling had its height weighed at about half (H1 on ground2's floor cuts: 0.2-0.25 m over
+    the scaled hips); with the vertical's cost in place of the up axis' instead of beside it, the
+    lying pelvis of H1's fall on pushAndFall1_subject4 132-152 s drifted and its feet slid
+    (skate 9.9 -> 15.1 mm/s)."""
+    # Columns of a rotation are its body's axes in the world: row 2 holds their vertical parts.
+    vertical_share = targets.orientations[config.root_body][:, 2, :] ** 2
+    vertical = weights.root_position + (weights.root_height - weights.root_position) * vertical_share
+    upright = np.array([weights.root_position, weights.root_position, weights.root_height])
+    return np.maximum(vertical, upright)
