@@ -92,11 +92,13 @@ def test_pelvis_slack_keeps_planted_feet_within_half_the_slide(fixed_pelvis, sla
         assert slack_pelvis[name] == 0, name
 
 
-def test_the_feet_correction_changes_gradually():
-    assert RetargetConfig().ik.refine_correction_rate == 10.0
-    flipping = _retarget("g1", "fallAndGetUp3_subject1", GETTING_UP_S, refine_correction_rate=1e4)
+def test_a_getting_up_leg_keeps_its_planted_foot_slow():
+    """Until stage 29 the feet refinement flipped a near-straight leg here for a frame, its planted
+    foot at over 2 m/s, unless its correction changed gradually (`ik.refine_correction_rate`).
+    Since the pelvis is held in height along the vertical (stage 30) the leg stays bent: the foot
+    reads 0.24 m/s with the rate limit and without it, as in 36 other windows of G1's three
+    getting-up takes, so no clip here shows the limit at work any more."""
     gradual = _retarget("g1", "fallAndGetUp3_subject1", GETTING_UP_S)
-    assert _fastest_standing_foot(flipping) > 2.0
     assert _fastest_standing_foot(gradual) < 0.5
 
 

@@ -339,8 +339,9 @@ class LagRepair:
     No one cost suited every stretch at stage 24: at 1, H1 ground2_subject2 75-95 s slid back onto
     the lying branch while the performer sat up (pelvis p95 0.285 m; 0.146 at 4); at 4, G1
     ground2_subject2 61-70 s followed the backward solve frame by frame onto a worse stretch
-    (0.080 -> 0.130). Since the pelvis is held to its height along the vertical (stage 30), neither
-    stretch needs the choice."""
+    (0.080 -> 0.130). Since the pelvis is held to its height along the vertical (stage 30), the two
+    costs read alike on the first (100 diverged frames at 4, 105 at 1) and the second needs no
+    repair."""
     rejoin_s: float = 0.5
     """After the stretch, seconds over which the re-solve is guided back to and cross-faded into the
     first solution, so the splice is continuous."""

@@ -284,7 +284,8 @@ class RetargetIk:
         starts = [self.initial_configuration(joints) for joints in self.start_postures]
         if len(starts) == 1:
             return starts[0]
-        trial = range(min(self.targets.n_frames, max(1, round(self.settings.start_trial_s * self.targets.fps))))
+        trial_frames = max(1, round(self.settings.start_trial_s * self.targets.fps))
+        trial = range(min(self.targets.n_frames, trial_frames))
         errors = [self._trial_error(start, trial) for start in starts]
         return starts[int(np.argmin(errors))]
 
