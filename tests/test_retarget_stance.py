@@ -96,8 +96,9 @@ def test_a_getting_up_leg_keeps_its_planted_foot_slow():
     """Until stage 29 the feet refinement flipped a near-straight leg here for a frame, its planted
     foot at over 2 m/s, unless its correction changed gradually (`ik.refine_correction_rate`).
     Since the pelvis is held in height along the vertical (stage 30) the leg stays bent: the foot
-    reads 0.24 m/s with the rate limit and without it, as in 36 other windows of G1's three
-    getting-up takes, so no clip here shows the limit at work any more."""
+    reads 0.24 m/s with the rate limit and without it. Over 35 ten-second windows of G1's three
+    getting-up takes the limit changed no window's fastest planted foot: no clip here shows it at
+    work any more."""
     gradual = _retarget("g1", "fallAndGetUp3_subject1", GETTING_UP_S)
     assert _fastest_standing_foot(gradual) < 0.5
 
