@@ -220,7 +220,9 @@ class IkConfig:
     refine_iterations: int = 1
     """Iterations per frame of the feet refinement after smoothing."""
     refine_correction_rate: float = 10.0
-    """How fast (rad/s) the refinement's correction of each joint may change from frame to frame."""
+    """How fast (rad/s) the refinement's correction of each joint may change from frame to frame.
+    It still binds at stage 30: without it, H1 on ground2_subject3 played at 1.25x, 128-148 s,
+    skates 23.1 mm/s instead of 14.2 (the 256 floor cuts otherwise alike)."""
     refine_posture_cost: float = 5.0
     """How strongly the refinement holds joints at their smoothed values (and the pelvis at its
     smoothed position, in 1/m)."""
@@ -341,7 +343,8 @@ class LagRepair:
     ground2_subject2 61-70 s followed the backward solve frame by frame onto a worse stretch
     (0.080 -> 0.130). Since the pelvis is held to its height along the vertical (stage 30), the two
     costs read alike on the first (100 diverged frames at 4, 105 at 1) and the second needs no
-    repair."""
+    repair. Cost 1 alone over the 256 floor cuts at stage 30: one more cut meets every bar (an
+    excused pelvis 0.101 -> 0.100) and the keypoint error rises, 78.6 -> 79.7 mm; not taken."""
     rejoin_s: float = 0.5
     """After the stretch, seconds over which the re-solve is guided back to and cross-faded into the
     first solution, so the splice is continuous."""
