@@ -361,6 +361,39 @@ class LagRepair:
 
 
 @dataclass(frozen=True)
+class PelvisRepair:
+    """When a stretch near the floor where the pelvis stayed above its target is solved again
+    with the pelvis held harder, and when that is kept (`pelvis_repair.py`).
+
+    Held harder over whole clips, the pelvis came down wherever it sat too high, but the feet
+    slid on the cuts where the body lies and gets up again (the floor-work study, "Tried with
+    stage 30"): H1's pelvis sat on its hip housings, 0.12 m over the scaled hips, on
+    fallAndGetUp2_subject3 24-44 s (pelvis p95 0.107 m)."""
+
+    gain: float = 5.0
+    """The pelvis's position costs are multiplied by this in the re-solve (1: no repair)."""
+    hips_below_m: float = 0.20
+    """A frame is raised while the scaled human hips are lower than this (lying, sitting) ..."""
+    raised_m: float = 0.06
+    """... and the pelvis is more than this above its target."""
+    padding_s: float = 0.5
+    """Seconds re-solved before and after a raised stretch (overlapping stretches merge)."""
+    rejoin_s: float = 0.5
+    """After the stretch, seconds over which the re-solve is cross-faded into the first solve."""
+    judge_margin_s: float = 1.0
+    """Seconds on each side of a window that are finished (smoothed, feet refined, plants locked)
+    with it to judge it: the feet of the IK's own output slide 40-180 mm/s on floor work before
+    those passes, and no reading taken there told a re-solve they mend from one they do not."""
+    skate_tolerance_m_s: float = 0.002
+    """A re-solve is kept only if it lowers the finished pelvis and its finished feet slide on
+    the floor at most this much faster, on the mean, than the first solve's."""
+
+    def __post_init__(self) -> None:
+        require_positive(self, "gain", "hips_below_m", "raised_m")
+        require_non_negative(self, "padding_s", "rejoin_s", "judge_margin_s", "skate_tolerance_m_s")
+
+
+@dataclass(frozen=True)
 class RetargetConfig:
     """Output rate and the settings of each retargeting step (`--set retarget.weights.feet_position=50`)."""
 
@@ -379,6 +412,8 @@ class RetargetConfig:
     """IK iterations, limits and the sequence-level smoothing."""
     repair: LagRepair = LagRepair()
     """When stretches that fell far behind their targets are solved again."""
+    pelvis_repair: PelvisRepair = PelvisRepair()
+    """When a pelvis left above its target near the floor is solved again."""
     plant_lock: PlantLockConfig = PlantLockConfig()
     """How planted feet are held still in the end."""
     moving_feet: MovingFootClearance = MovingFootClearance()

@@ -31,12 +31,17 @@ def lagging_windows(errors: np.ndarray, fps: float, repair: LagRepair) -> list[R
         return []
     median = float(np.median(errors))
     threshold = max(repair.error_ratio * median, median + repair.error_margin_m)
-    lagging = errors > threshold
-    padding = int(round(repair.padding_s * fps))
-    rejoin = int(round(repair.rejoin_s * fps))
-    last_frame = len(errors) - 1
+    return padded_windows(errors > threshold, fps, repair.padding_s, repair.rejoin_s)
+
+
+def padded_windows(frames: np.ndarray, fps: float, padding_s: float, rejoin_s: float) -> list[RepairWindow]:
+    """The stretches of the (T,) bool `frames`, padded by `padding_s` on both sides (overlapping
+    ones merged), each rejoining the first solve over `rejoin_s`."""
+    padding = int(round(padding_s * fps))
+    rejoin = int(round(rejoin_s * fps))
+    last_frame = len(frames) - 1
     spans: list[list[int]] = []
-    for t in np.flatnonzero(lagging):
+    for t in np.flatnonzero(frames):
         start = max(int(t) - padding, 0)
         end = min(int(t) + padding, last_frame)
         if spans and start <= spans[-1][1]:
@@ -52,7 +57,7 @@ def lagging_windows(errors: np.ndarray, fps: float, repair: LagRepair) -> list[R
 
 def repair_lag(ik: RetargetIk, qpos: np.ndarray, repair: LagRepair) -> tuple[np.ndarray, int]:
     """`qpos` with its lagging stretches re-solved where that lowers their error and brings no
-    configured body pair into contact, or deeper into it, than it was (`_brings_contact`), and how
+    configured body pair into contact, or deeper into it, than it was (`brings_contact`), and how
     many were.
 
     The re-solve keeps its pairs apart, but its fade back into the forward solve blends two
@@ -67,7 +72,7 @@ def repair_lag(ik: RetargetIk, qpos: np.ndarray, repair: LagRepair) -> tuple[np.
         span = slice(window.anchor + 1, window.rejoin_end + 1)
         lowers_peak = candidate_errors.max() < errors[span].max()
         lowers_mean = candidate_errors.mean() <= errors[span].mean()
-        if lowers_peak and lowers_mean and not _brings_contact(ik, candidate, out[span]):
+        if lowers_peak and lowers_mean and not brings_contact(ik, candidate, out[span]):
             out[span] = candidate
             errors[span] = candidate_errors
             repaired += 1
@@ -85,7 +90,7 @@ def _best_re_solve(
     return candidates[best], errors[best]
 
 
-def _brings_contact(ik: RetargetIk, candidate: np.ndarray, first: np.ndarray) -> bool:
+def brings_contact(ik: RetargetIk, candidate: np.ndarray, first: np.ndarray) -> bool:
     """Whether `candidate` puts a configured body pair into contact where `first` had none, or
     deeper than the IK's step check allows where `first` only touched.
 
@@ -131,7 +136,6 @@ def _solve_window_again(
     """Frames after `anchor` up to `rejoin_end` solved forward again, pulled towards `guide` at
     `guide_cost`, then cross-faded into the forward solve after `backward_start`."""
     first = window.anchor
-    end = window.backward_start
     last = window.rejoin_end
     guide_task = mink.PostureTask(ik.robot.model, cost=guide_cost)
     resolved = np.empty_like(guide)
@@ -148,6 +152,15 @@ def _solve_window_again(
             repair.catch_up_min_gain_m,
         )
         previous = resolved[k]
+    return fade_into(qpos, resolved, window)
+
+
+def fade_into(qpos: np.ndarray, resolved: np.ndarray, window: RepairWindow) -> np.ndarray:
+    """`resolved` (the frames after `anchor` up to `rejoin_end`) cross-faded into `qpos` over the
+    frames after `backward_start`."""
+    first = window.anchor
+    end = window.backward_start
+    last = window.rejoin_end
     fade = np.ones(len(resolved))
     tail = last - end
     if tail > 0:

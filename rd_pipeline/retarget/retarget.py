@@ -15,6 +15,7 @@ from rd_pipeline.retarget.collision import eased_until_clear
 from rd_pipeline.retarget.config import RetargetConfig
 from rd_pipeline.retarget.ik import RetargetIk
 from rd_pipeline.retarget.moving_feet import lift_moving_feet
+from rd_pipeline.retarget.pelvis_repair import lower_raised_pelvis
 from rd_pipeline.retarget.plant_lock import lock_plants
 from rd_pipeline.retarget.quality import FootMeshes, colliding_frames
 from rd_pipeline.retarget.repair import repair_lag
@@ -67,21 +68,13 @@ def retarget(
     ik = RetargetIk(robot, targets, params.weights, settings, hulls)
     qpos = ik.solve(track(range(targets.n_frames), targets.n_frames, "whole-body IK"))
     qpos, repaired = repair_lag(ik, qpos, params.repair)
-    if settings.trajectory_smoothing_s > 0:
-        smoothed = _smooth_trajectory(robot, qpos, settings.trajectory_smoothing_s * rate)
-        # Smoothing knows nothing of self-collision: where it brings a pair well inside the margin
-        # the IK kept, ease back to the IK solution for those frames.
-        clearance = settings.smoothed_pair_fraction * settings.collision_margin_m
-        close = colliding_frames(robot, smoothed, -clearance)
-        keep_ik = np.minimum(smooth_cover(close.astype(float), rate, settings.ik_blend_s), 1.0)
-        qpos = blend_configurations(smoothed, qpos, keep_ik)
-        refined = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames, "feet on the smoothed motion"))
-        if settings.pelvis_slack_m > 0:
-            refined = _pelvis_slack(ik, qpos, refined)
-        qpos = lock_plants(robot, refined, targets.foot_contact, rate, params.plant_lock, settings)
-        qpos = lift_moving_feet(
-            robot, feet, qpos, targets.foot_contact, rate, params.moving_feet, params.plant_lock, settings
-        )
+
+    def finish(frames: slice, rows: np.ndarray) -> tuple[RetargetIk, np.ndarray]:
+        part = RetargetIk(robot, targets.frames(frames), params.weights, settings, hulls)
+        return part, _finish(part, rows, params, feet)
+
+    qpos, _ = lower_raised_pelvis(ik, qpos, params.pelvis_repair, finish)
+    qpos = _finish(ik, qpos, params, feet, track)
     if rate != fps:
         targets = build_targets(human, robot, fps, feet.vertices, params.contact, params.shape, params.body_contact)
         qpos = _resampled(robot, qpos, rate, np.arange(targets.n_frames) / fps, settings.pair_depth_limit_m)
@@ -97,6 +90,37 @@ def retarget(
         targets=targets,
         ground_lift_max_m=float(lift.max()),
         repaired_windows=repaired,
+    )
+
+
+def _finish(
+    ik: RetargetIk,
+    qpos: np.ndarray,
+    params: RetargetConfig,
+    feet: FootMeshes,
+    track: Callable[[Iterable[int], int, str], Iterable[int]] = lambda frames, total, label: frames,
+) -> np.ndarray:
+    """The passes after the IK: the trajectory smoothed, the feet put back on their targets by the
+    legs (and the pelvis where they cannot), the plants locked and the moving feet lifted."""
+    settings = ik.settings
+    if settings.trajectory_smoothing_s <= 0:
+        return qpos
+    robot = ik.robot
+    targets = ik.targets
+    rate = targets.fps
+    smoothed = _smooth_trajectory(robot, qpos, settings.trajectory_smoothing_s * rate)
+    # Smoothing knows nothing of self-collision: where it brings a pair well inside the margin
+    # the IK kept, ease back to the IK solution for those frames.
+    clearance = settings.smoothed_pair_fraction * settings.collision_margin_m
+    close = colliding_frames(robot, smoothed, -clearance)
+    keep_ik = np.minimum(smooth_cover(close.astype(float), rate, settings.ik_blend_s), 1.0)
+    qpos = blend_configurations(smoothed, qpos, keep_ik)
+    refined = ik.refine_feet(qpos, track(range(targets.n_frames), targets.n_frames, "feet on the smoothed motion"))
+    if settings.pelvis_slack_m > 0:
+        refined = _pelvis_slack(ik, qpos, refined)
+    qpos = lock_plants(robot, refined, targets.foot_contact, rate, params.plant_lock, settings)
+    return lift_moving_feet(
+        robot, feet, qpos, targets.foot_contact, rate, params.moving_feet, params.plant_lock, settings
     )
 
 

@@ -5,7 +5,7 @@ Everything here is computed from the human skeleton and the robot model; nothing
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -60,6 +60,19 @@ class RetargetTargets:
     @property
     def n_frames(self) -> int:
         return self.positions.shape[0]
+
+    def frames(self, span: slice) -> RetargetTargets:
+        """The targets of the frames `span` alone, as a clip of their own."""
+        return replace(
+            self,
+            positions=self.positions[span],
+            orientations={body: rotations[span] for body, rotations in self.orientations.items()},
+            foot_contact=self.foot_contact[span],
+            foot_lift=self.foot_lift[span],
+            body_contact=self.body_contact[span],
+            human_pelvis=self.human_pelvis[span],
+            human_standing=self.human_standing[span],
+        )
 
     def foot_orientations(self, feet: tuple[str, str]) -> np.ndarray:
         """(T, 2, 3, 3) target orientations of the left and right foot bodies."""
