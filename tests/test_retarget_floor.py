@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
-from rd_pipeline.retarget.config import IkConfig, LagRepair, RetargetConfig
+from rd_pipeline.retarget.config import IkConfig, LagRepair, PelvisRepair, RetargetConfig
 from rd_pipeline.retarget.quality import FootMeshes, quality_series, summarize_quality
 from rd_pipeline.retarget.retarget import RetargetResult, retarget
 from rd_pipeline.retarget.targets import build_targets
@@ -186,6 +186,33 @@ def _figures(human: HumanMotion, robot_name: str, *configs: RetargetConfig) -> l
         series = quality_series(robot, result.reference, targets.positions, targets.bodies, targets.human_pelvis)
         figures.append((result.repaired_windows, summarize_quality(robot, result.reference, series)))
     return figures
+
+
+@pytest.mark.slow
+def test_a_pelvis_left_on_the_hip_housings_is_solved_again_lower() -> None:
+    """H1 on fallAndGetUp2_subject3 27-35 s: for a second the performer sits back on one hand,
+    hips 8 cm off the floor, and H1 sits up on its hip housings, its pelvis 0.10 m higher over
+    the scaled hips than it is standing. Solved again with the pelvis held harder, and kept
+    because the finished feet slide no more, the pelvis comes down."""
+    human = _excerpt("fallAndGetUp2_subject3", 27.0, 35.0)
+    unrepaired = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(gain=1.0))
+    (_, before), (_, after) = _figures(human, "h1", unrepaired, RetargetConfig())
+    assert before["pelvis_height_dev_p95_m"] > 0.10
+    assert after["pelvis_height_dev_p95_m"] <= 0.06
+    assert after["skate_stance_mean_mm_s"] <= before["skate_stance_mean_mm_s"] + 0.5
+
+
+@pytest.mark.slow
+def test_a_lower_pelvis_that_would_drag_the_feet_is_not_kept() -> None:
+    """H1 on pushAndFall1_subject4 144-152 s: the performer lies, then gets up. The stretch
+    solved again with the pelvis held harder hands the get-up a posture whose planted feet
+    slide (21 mm/s kept regardless, 7.7 without the repair): judged on the finished motion, it
+    is not kept."""
+    human = _excerpt("pushAndFall1_subject4", 144.0, 152.0)
+    regardless = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(skate_tolerance_m_s=10.0))
+    (_, kept), (_, judged) = _figures(human, "h1", regardless, RetargetConfig())
+    assert kept["skate_stance_mean_mm_s"] > 15.0
+    assert judged["skate_stance_mean_mm_s"] < 10.0
 
 
 def test_a_clip_that_opens_kneeling_starts_from_folded_knees() -> None:
