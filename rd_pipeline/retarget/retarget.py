@@ -49,7 +49,8 @@ def retarget(
     labelled by pass).
 
     Per-frame IK against the targets; stretches that fell far behind them solved again from both
-    ends; then a sequence-level pass: the whole trajectory is smoothed and the feet are put back on
+    ends, and stretches near the floor where the pelvis stayed high solved again with it held
+    harder (`pelvis_repair.py`); then a sequence-level pass: the whole trajectory is smoothed and the feet are put back on
     their targets by a leg-only IK that stays near the smoothed pose.
     """
     if not np.all(np.isfinite(human.pos_w)):
