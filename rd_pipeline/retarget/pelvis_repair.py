@@ -18,9 +18,10 @@ from rd_pipeline.retarget.ik import RetargetIk
 from rd_pipeline.retarget.quality import FootMeshes, QualityThresholds
 from rd_pipeline.retarget.repair import RepairWindow, brings_contact, fade_into, padded_windows
 
-Finish = Callable[[slice, np.ndarray], tuple[RetargetIk, np.ndarray]]
-"""Finishes rows of a trajectory (smoothing, feet refined, plants locked) as the frames `slice`
-of the clip, with an IK over those frames alone; returns that IK and the finished rows."""
+Finish = Callable[[slice, tuple[np.ndarray, ...]], tuple[RetargetIk, list[np.ndarray]]]
+"""Finishes each of several versions of the frames `slice` of the clip (smoothing, feet
+refined, plants locked) with one IK over those frames alone; returns that IK and the finished
+versions."""
 
 
 def lower_raised_pelvis(
@@ -69,7 +70,9 @@ def pelvis_excess(ik: RetargetIk, qpos: np.ndarray) -> np.ndarray:
 
 def floor_skate(ik: RetargetIk, qpos: np.ndarray) -> float:
     """Mean horizontal speed (m/s) of the feet over the steps of `qpos` that end with the sole on
-    the floor: the quality ruler's skate (`QualityThresholds.ground_contact_height_m`)."""
+    the floor (under `QualityThresholds.ground_contact_height_m`, as the quality ruler counts
+    stance). The ruler's own `sole_heights_and_speeds` wants a whole reference motion and takes
+    central differences; this one takes forward differences over the rows it is given."""
     meshes = FootMeshes.from_robot(ik.robot)
     bodies = [ik.robot.body_ids[foot] for foot in meshes.body_names]
     positions = np.empty((len(qpos), 2, 3))
@@ -120,8 +123,7 @@ def _finishes_better(
     frames = slice(max(window.anchor + 1 - margin, 0), min(window.rejoin_end + 1 + margin, len(qpos)))
     with_candidate = qpos[frames].copy()
     with_candidate[window.anchor + 1 - frames.start : window.rejoin_end + 1 - frames.start] = candidate
-    part, first = finish(frames, qpos[frames])
-    _, lowered = finish(frames, with_candidate)
+    part, (first, lowered) = finish(frames, (qpos[frames], with_candidate))
     higher = np.maximum(pelvis_excess(part, first), 0.0).mean()
     lower = np.maximum(pelvis_excess(part, lowered), 0.0).mean()
     slide = floor_skate(part, lowered) - floor_skate(part, first)

@@ -70,9 +70,9 @@ def retarget(
     qpos = ik.solve(track(range(targets.n_frames), targets.n_frames, "whole-body IK"))
     qpos, repaired = repair_lag(ik, qpos, params.repair)
 
-    def finish(frames: slice, rows: np.ndarray) -> tuple[RetargetIk, np.ndarray]:
+    def finish(frames: slice, versions: tuple[np.ndarray, ...]) -> tuple[RetargetIk, list[np.ndarray]]:
         part = RetargetIk(robot, targets.frames(frames), params.weights, settings, hulls)
-        return part, _finish(part, rows, params, feet)
+        return part, [_finish(part, rows, params, feet) for rows in versions]
 
     qpos, _ = lower_raised_pelvis(ik, qpos, params.pelvis_repair, finish)
     qpos = _finish(ik, qpos, params, feet, track)
