@@ -60,7 +60,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="retarget",
-    version=31,
+    version=32,
     description="human motion -> robot reference motion at 50 Hz (mink IK) + quality.json",
     params=RetargetConfig,
     provides="reference",

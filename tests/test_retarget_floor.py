@@ -16,6 +16,7 @@ import pytest
 from conftest import LAFAN_DIR
 from scipy.spatial.transform import Rotation
 
+from bench.motion_variants import played_at
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.retarget.config import IkConfig, LagRepair, PelvisRepair, RetargetConfig
@@ -195,7 +196,7 @@ def test_a_pelvis_left_on_the_hip_housings_is_solved_again_lower() -> None:
     the scaled hips than it is standing. Solved again with the pelvis held harder, and kept
     because the finished feet slide no more, the pelvis comes down."""
     human = _excerpt("fallAndGetUp2_subject3", 27.0, 35.0)
-    unrepaired = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(gain=1.0))
+    unrepaired = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(gains=()))
     (_, before), (_, after) = _figures(human, "h1", unrepaired, RetargetConfig())
     assert before["pelvis_height_dev_p95_m"] > 0.10
     assert after["pelvis_height_dev_p95_m"] <= 0.06
@@ -215,6 +216,37 @@ def test_a_lower_pelvis_that_would_drag_the_feet_is_not_kept() -> None:
     assert judged["skate_stance_mean_mm_s"] < 10.0
 
 
+@pytest.mark.slow
+def test_a_stretch_whose_feet_slide_at_the_stiffest_gain_is_kept_at_a_softer_one() -> None:
+    """H1-2 on ground2_subject2 played at 0.8 times its speed, 83.2-90.4 s of the take: the
+    performer lies with the hips off the floor and a foot planted. Held five times harder, the
+    pelvis comes down and the finished feet slide (judged, not kept); three times harder it comes
+    down less and they slide no more, and that is kept."""
+    human = played_at(_excerpt("ground2_subject2", 83.2, 90.4), 0.8)
+    stiffest = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(gains=(5.0,)))
+    (_, only_stiffest), (_, family) = _figures(human, "h1_2", stiffest, RetargetConfig())
+    assert only_stiffest["pelvis_height_dev_p95_m"] > 0.12
+    assert family["pelvis_height_dev_p95_m"] <= 0.10
+    assert family["skate_stance_mean_mm_s"] <= only_stiffest["skate_stance_mean_mm_s"] + 1.0
+
+
+@pytest.mark.slow
+def test_a_stretch_the_ruler_reads_within_its_bar_is_left_as_solved() -> None:
+    """G1 on ground2_subject3 164-184 s: near the floor the pelvis sits up to 0.075 m higher over
+    the scaled hips than its median, under the ruler's 0.10 m. Its raised stretches are left as
+    the IK solved them (the output is that of no repair at all); asked to mend any height over
+    the median, the repair re-solves them."""
+    human = _excerpt("ground2_subject3", 164.0, 184.0)
+    robot = load_robot("g1")
+    unrepaired = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(gains=()))
+    any_height = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(visible_m=0.0))
+    left, default, mended = (
+        retarget(human, robot, config).reference for config in (unrepaired, RetargetConfig(), any_height)
+    )
+    np.testing.assert_array_equal(default.joint_pos, left.joint_pos)
+    assert np.abs(mended.joint_pos - left.joint_pos).max() > 0.1
+
+
 def test_a_clip_that_opens_kneeling_starts_from_folded_knees() -> None:
     """G1 on ground2_subject3 61-65 s: the performer kneels and sits back. From the standing default
     the first frame kneels upright with the hips thrown back and the robot stays on that branch,
@@ -222,7 +254,7 @@ def test_a_clip_that_opens_kneeling_starts_from_folded_knees() -> None:
     clip starts there and sits on its heels. The pelvis repair is off in both: since stage 31
     it brings the standing start's pelvis down too (p95 0.078 m)."""
     human = _excerpt("ground2_subject3", 61.0, 65.0)
-    best = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(gain=1.0))
+    best = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(gains=()))
     standing = dataclasses.replace(best, ik=IkConfig(start_knee_bends=(0.0,)))
     (_, from_standing), (_, from_best) = _figures(human, "g1", standing, best)
     assert from_standing["pelvis_height_dev_p95_m"] > 0.12

@@ -70,11 +70,11 @@ def retarget(
     qpos = ik.solve(track(range(targets.n_frames), targets.n_frames, "whole-body IK"))
     qpos, repaired = repair_lag(ik, qpos, params.repair)
 
-    def finish(frames: slice, versions: tuple[np.ndarray, ...]) -> tuple[RetargetIk, list[np.ndarray]]:
+    def finisher(frames: slice) -> tuple[RetargetIk, Callable[[np.ndarray], np.ndarray]]:
         part = RetargetIk(robot, targets.frames(frames), params.weights, settings, hulls)
-        return part, [_finish(part, rows, params, feet) for rows in versions]
+        return part, lambda rows: _finish(part, rows, params, feet)
 
-    qpos, _ = lower_raised_pelvis(ik, qpos, params.pelvis_repair, finish)
+    qpos, _ = lower_raised_pelvis(ik, qpos, params.pelvis_repair, finisher)
     qpos = _finish(ik, qpos, params, feet, track)
     if rate != fps:
         targets = build_targets(human, robot, fps, feet.vertices, params.contact, params.shape, params.body_contact)
