@@ -16,7 +16,7 @@ import pytest
 from conftest import LAFAN_DIR
 from scipy.spatial.transform import Rotation
 
-from bench.motion_variants import played_at
+from bench.retarget_variants import floor_cut
 from rd_pipeline.motion.bvh import read_bvh
 from rd_pipeline.motion.human import LAFAN_CM_TO_M, LAFAN_TO_Z_UP, HumanMotion, human_motion_from_bvh
 from rd_pipeline.retarget.config import IkConfig, LagRepair, PelvisRepair, RetargetConfig
@@ -218,11 +218,11 @@ def test_a_lower_pelvis_that_would_drag_the_feet_is_not_kept() -> None:
 
 @pytest.mark.slow
 def test_a_stretch_whose_feet_slide_at_the_stiffest_gain_is_kept_at_a_softer_one() -> None:
-    """H1-2 on ground2_subject2 played at 0.8 times its speed, 83.2-90.4 s of the take: the
-    performer lies with the hips off the floor and a foot planted. Held five times harder, the
-    pelvis comes down and the finished feet slide (judged, not kept); three times harder it comes
-    down less and they slide no more, and that is kept."""
-    human = played_at(_excerpt("ground2_subject2", 83.2, 90.4), 0.8)
+    """H1-2 on the floor cut of ground2_subject2 played at 0.8 times its speed, 93-113 s: the
+    performer lies with the hips off the floor and a foot planted. Held five times harder over
+    the last 6 s, the pelvis comes down and the finished feet slide 15.6 -> 46.6 mm/s (judged,
+    not kept); three times harder it comes down less and they slide no more, and that is kept."""
+    human = floor_cut("ground2_subject2", "ground2_subject2 x0.8 93-113 s", "floor_cut_tempo_0.8")
     stiffest = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(gains=(5.0,)))
     (_, only_stiffest), (_, family) = _figures(human, "h1_2", stiffest, RetargetConfig())
     assert only_stiffest["pelvis_height_dev_p95_m"] > 0.12
@@ -232,17 +232,16 @@ def test_a_stretch_whose_feet_slide_at_the_stiffest_gain_is_kept_at_a_softer_one
 
 @pytest.mark.slow
 def test_a_stretch_the_ruler_reads_within_its_bar_is_left_as_solved() -> None:
-    """G1 on ground2_subject3 164-184 s: near the floor the pelvis sits up to 0.075 m higher over
-    the scaled hips than its median, under the ruler's 0.10 m. Its raised stretches are left as
-    the IK solved them (the output is that of no repair at all); asked to mend any height over
-    the median, the repair re-solves them."""
-    human = _excerpt("ground2_subject3", 164.0, 184.0)
+    """G1 on the floor cut of ground2_subject3 at 164-184 s: near the floor the pelvis sits more
+    than 0.06 m over its target, and the ruler reads it within its bar (p95 0.075 m). Its raised
+    stretches are left as the IK solved them (the output is that of no repair at all); asked to
+    mend any height over the median, the repair re-solves one and keeps it."""
+    human = floor_cut("ground2_subject3", "ground2_subject3 164-184 s")
     robot = load_robot("g1")
     unrepaired = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(gains=()))
     any_height = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(visible_m=0.0))
-    left, default, mended = (
-        retarget(human, robot, config).reference for config in (unrepaired, RetargetConfig(), any_height)
-    )
+    configs = (unrepaired, RetargetConfig(), any_height)
+    left, default, mended = (retarget(human, robot, config).reference for config in configs)
     np.testing.assert_array_equal(default.joint_pos, left.joint_pos)
     assert np.abs(mended.joint_pos - left.joint_pos).max() > 0.1
 
