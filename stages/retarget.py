@@ -60,7 +60,7 @@ def _run(ctx: StageContext) -> dict[str, Any]:
 
 STAGE = Stage(
     name="retarget",
-    version=32,
+    version=33,
     description="human motion -> robot reference motion at 50 Hz (mink IK) + quality.json",
     params=RetargetConfig,
     provides="reference",

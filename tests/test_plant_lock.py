@@ -90,7 +90,7 @@ def test_a_foot_the_pelvis_drags_slides_only_past_the_reach(
     contact = np.ones((100, 2), dtype=bool)
     before = foot_positions(g1, qpos)
     after = foot_positions(g1, _lock(g1, qpos, contact))
-    # Held while the earlier pose is within reach (0.02 m), then carried along at the reach.
+    # Held while the earlier pose is within reach, then carried along at the reach.
     reach = PlantLockConfig().reach_m
     assert np.abs(after[:15, :, 0] - after[0, :, 0]).max() < 0.001
     assert np.abs(after[-1, :, 0] - before[-1, :, 0] + reach).max() < 0.002
