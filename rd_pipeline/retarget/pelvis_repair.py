@@ -5,7 +5,10 @@ Held harder over whole clips, a pelvis that sat on the robot's hip housings came
 posture it lay in carried into the get-up that followed and dragged the planted feet there. A
 re-solve of the raised stretch alone, faded back into the first solve, leaves the rest of the
 clip as it was; whether its feet slide more shows only once the passes after the IK have put
-them back, so each window is finished, with a margin, before it is judged."""
+them back, so each window is finished, with a margin, before it is judged. No one gain suits
+every stretch, so each is tried at several, stiffest first; and a stretch the quality ruler
+would read within its bar is left alone, for a re-solve and its judge cost as much as the whole
+clip's IK."""
 
 from __future__ import annotations
 
@@ -31,10 +34,7 @@ def lower_raised_pelvis(
     the pelvis, slides the feet no faster and brings no body pair into contact; and how many were."""
     if not repair.gains:
         return qpos, 0
-    raised = raised_frames(ik, qpos, repair)
-    windows = padded_windows(raised, ik.targets.fps, repair.padding_s, repair.rejoin_s)
-    visible = visibly_raised(ik, qpos, repair)
-    windows = [window for window in windows if visible[window.anchor + 1 : window.rejoin_end + 1].any()]
+    windows = _visible_windows(ik, qpos, repair)
     if not windows:
         return qpos, 0
     lag_limit = float(np.median(ik.keypoint_errors(qpos))) + ik.settings.catch_up_margin_m
@@ -46,6 +46,14 @@ def lower_raised_pelvis(
             out[window.anchor + 1 : window.rejoin_end + 1] = kept
             lowered += 1
     return out, lowered
+
+
+def _visible_windows(ik: RetargetIk, qpos: np.ndarray, repair: PelvisRepair) -> list[RepairWindow]:
+    """The padded raised stretches with a frame somewhere in them that is `visibly_raised`."""
+    raised = raised_frames(ik, qpos, repair)
+    windows = padded_windows(raised, ik.targets.fps, repair.padding_s, repair.rejoin_s)
+    visible = visibly_raised(ik, qpos, repair)
+    return [window for window in windows if visible[window.anchor + 1 : window.rejoin_end + 1].any()]
 
 
 def _stiffest_kept(
