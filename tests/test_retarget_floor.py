@@ -207,13 +207,13 @@ def test_a_pelvis_left_on_the_hip_housings_is_solved_again_lower() -> None:
 def test_a_lower_pelvis_that_would_drag_the_feet_is_not_kept() -> None:
     """H1 on pushAndFall1_subject4 144-152 s: the performer lies, then gets up. The stretch
     solved again with the pelvis held harder hands the get-up a posture whose planted feet
-    slide (21 mm/s kept regardless, 7.7 without the repair): judged on the finished motion, it
-    is not kept."""
+    slide (12.6 mm/s kept regardless, 4.6 as judged; 21.2 and 8.1 while the plant lock reached
+    2 cm, before stage 33): judged on the finished motion, it is not kept."""
     human = _excerpt("pushAndFall1_subject4", 144.0, 152.0)
     regardless = dataclasses.replace(RetargetConfig(), pelvis_repair=PelvisRepair(skate_tolerance_m_s=10.0))
     (_, kept), (_, judged) = _figures(human, "h1", regardless, RetargetConfig())
-    assert kept["skate_stance_mean_mm_s"] > 15.0
-    assert judged["skate_stance_mean_mm_s"] < 10.0
+    assert kept["skate_stance_mean_mm_s"] > 10.0
+    assert judged["skate_stance_mean_mm_s"] < 7.0
 
 
 @pytest.mark.slow
