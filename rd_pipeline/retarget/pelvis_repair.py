@@ -19,7 +19,7 @@ import numpy as np
 
 from rd_pipeline.retarget.config import PelvisRepair
 from rd_pipeline.retarget.ik import RetargetIk
-from rd_pipeline.retarget.quality import FootMeshes, QualityThresholds
+from rd_pipeline.retarget.quality import FootMeshes, QualityThresholds, pelvis_height_deviation
 from rd_pipeline.retarget.repair import RepairWindow, brings_contact, fade_into, padded_windows
 
 Finisher = Callable[[slice], tuple[RetargetIk, Callable[[np.ndarray], np.ndarray]]]
@@ -90,8 +90,8 @@ def raised_frames(ik: RetargetIk, qpos: np.ndarray, repair: PelvisRepair) -> np.
 def visibly_raised(ik: RetargetIk, qpos: np.ndarray, repair: PelvisRepair) -> np.ndarray:
     """(T,) the pelvis is more than `visible_m` higher over the scaled human hips than its median
     over the clip: the deviation the quality ruler reads."""
-    over_hips = pelvis_heights(ik, qpos) - ik.targets.human_pelvis[:, 2]
-    return over_hips - np.median(over_hips) > repair.visible_m
+    deviation = pelvis_height_deviation(pelvis_heights(ik, qpos), ik.targets.human_pelvis[:, 2])
+    return deviation > repair.visible_m
 
 
 def pelvis_excess(ik: RetargetIk, qpos: np.ndarray) -> np.ndarray:
@@ -151,19 +151,17 @@ def _solve_lower(ik: RetargetIk, qpos: np.ndarray, window: RepairWindow, lag_lim
 
 @dataclass(frozen=True)
 class _WindowJudge:
-    """A window's first solve, finished over the window and `judge_margin_s` around it, against
-    which each re-solve of the window is judged finished the same way."""
+    """A window's first solve, finished over the window and `judge_margin_s` around it (an IK over
+    those frames alone), against which each re-solve of the window is judged finished the same way."""
 
-    frames: slice
-    """The frames finished: the window and the margin around it."""
     part: RetargetIk
-    """An IK over those frames alone."""
+    """An IK over the window and its margin alone."""
     finish: Callable[[np.ndarray], np.ndarray]
-    """The passes after the IK over those frames."""
+    """The passes after the IK over the window and its margin."""
     first: np.ndarray
-    """The first solve over `frames`."""
+    """The first solve over the window and its margin."""
     window_rows: slice
-    """The window's rows within `frames`."""
+    """The window's rows within `first`."""
     pelvis_m: float
     """The first solve's finished mean pelvis excess over its target."""
     skate_m_s: float
@@ -179,7 +177,6 @@ class _WindowJudge:
         first = qpos[frames]
         finished = finish(first)
         return cls(
-            frames=frames,
             part=part,
             finish=finish,
             first=first,

@@ -133,8 +133,7 @@ def quality_series(
         if human_pelvis.shape != (reference.n_frames, 3):
             raise PipelineError(f"human_pelvis has shape {human_pelvis.shape}, expected ({reference.n_frames}, 3)")
         root = reference.body_names.index(robot.config.root_body)
-        difference = reference.body_pos_w[:, root, 2] - human_pelvis[:, 2]
-        series["pelvis_height_dev_m"] = difference - np.median(difference)
+        series["pelvis_height_dev_m"] = pelvis_height_deviation(reference.body_pos_w[:, root, 2], human_pelvis[:, 2])
         series["human_root_speed_m_s"] = np.linalg.norm(_gradient(human_pelvis, dt), axis=-1)
     if foot_orientations is not None:
         series["planted_foot_turn_deg"] = _planted_foot_turn(robot, reference, foot_orientations)
@@ -206,6 +205,12 @@ def summarize_quality(
         "human_root_speed_p999_m_s": None if human_speed is None else _round(np.percentile(human_speed, 99.9)),
         "planted_foot_turn_p95_deg": _planted_turn_p95(foot_turn),
     }
+
+
+def pelvis_height_deviation(pelvis_z: np.ndarray, human_hips_z: np.ndarray) -> np.ndarray:
+    """(T,) the robot pelvis's height over the scaled human hips, its median over the clip removed."""
+    difference = pelvis_z - human_hips_z
+    return difference - np.median(difference)
 
 
 def sole_heights_and_speeds(robot: Robot, reference: ReferenceMotion) -> tuple[np.ndarray, np.ndarray]:
