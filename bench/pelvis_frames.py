@@ -5,11 +5,13 @@
 
 Each clip (a floor cut of a shared take, plain, mirrored or at another tempo, as
 `bench/retarget_variants.py` names it) is retargeted with the stage's default params on the robot
-and on its wider-ranges copy, and scored frame by frame with the pelvis ruler of
+and on its wider-ranges copies, and scored frame by frame with the pelvis ruler of
 `retarget_quality` (pelvis height against the scaled human's hips, the clip's median offset
-removed; bar 0.10 m). Frames over the bar are grouped into stretches, and each says:
+removed; bar 0.10 m). The wider-ranges copies are `range_copies` (`bench/retarget_ranges.py`): on
+H1 and H1-2, G1's leg ranges, every range 0.5 rad wider, and both; on G1, every range 0.5 rad
+wider. Frames over the bar are grouped into stretches, and each says:
 
-- how many of its frames the wider-ranges copy brings within the bar (the ranges explain those);
+- how many of its frames a wider-ranges copy brings within the bar (the ranges explain those);
 - of the frames the ranges leave with the robot above the human, how many have a robot body
   other than the feet resting on the floor (sitting on its hip motors: its build stops it going
   lower there, whatever the ranges), and which body;
@@ -24,10 +26,10 @@ Each frame over the bar gets the first of these causes that holds (ranges, body,
 back, lost); the ones with none are left.
 
 The causes after the ranges are read off the robot; what they cost is measured on one more copy,
-free of the build: G1's leg ranges, every range 0.5 rad wider still (hip pitch and ankles too),
-and no body but the feet with any volume (each collision geom a point at its centre). A frame
-that copy also leaves over the bar is not the robot's build, as far as ranges and volume go: it is
-where the targets and the IK put the pelvis.
+free of the build: G1's leg ranges, every range 0.5 rad wider, and no body but the feet with any
+volume (each collision geom a point at its centre). A frame that copy also leaves over the bar is
+not the robot's build, as far as ranges and volume go: it is where the targets and the IK put
+the pelvis.
 
 The same seconds are then scored inside the whole take (mirrored or played at the cut's tempo
 likewise), retargeted from its start, with the same ruler over those seconds. `<out>.md` is the table, `<out>.json` the numbers.
@@ -46,8 +48,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 
-from bench.retarget_ranges import build_free
-from bench.retarget_variants import BARS, FLOOR_CUT, _wider_ranges, clips, floor_cut, pelvis_deviation
+from bench.retarget_ranges import build_free, range_copies
+from bench.retarget_variants import BARS, FLOOR_CUT, clips, floor_cut, pelvis_deviation
 from rd_pipeline.errors import PipelineError
 from rd_pipeline.motion.human import HumanMotion
 from rd_pipeline.retarget.config import RetargetConfig
@@ -114,8 +116,10 @@ def _report(robot: Robot, name: str) -> dict:
     clip = floor_cut(take, name, f"floor_cut_{whole_variant}".removesuffix("_plain"))
     own_result = retarget(clip, robot, RetargetConfig())
     own = _scored(robot, own_result)
-    wider_robot = _wider_ranges(robot)
-    wider = _scored(wider_robot, retarget(clip, wider_robot, RetargetConfig()))
+    wider = {
+        name: pelvis_deviation(copy, retarget(clip, copy, RetargetConfig()))
+        for name, copy in range_copies(robot).items()
+    }
     free_robot = build_free(robot)
     free = pelvis_deviation(free_robot, retarget(clip, free_robot, RetargetConfig()))
     whole_human = clips(take, whole_variant)[0][1]
@@ -124,7 +128,7 @@ def _report(robot: Robot, name: str) -> dict:
     on_back = planted_on_back(clip, own_result.targets, soles)
     fps = own_result.reference.fps
     over = np.abs(own.deviation) > BAR_M
-    cause = _causes(own, wider, on_back)
+    cause = _causes(own, list(wider.values()), on_back)
     stretches = [_stretch(robot, own, cause, frames, fps) for frames in _over_bar(own, fps)]
     start_s = float(span.split("-")[0])
     whole = _within_whole_take(robot, whole_result, start_s, len(own.deviation))
@@ -132,7 +136,7 @@ def _report(robot: Robot, name: str) -> dict:
         "clip": name,
         "frames": len(over),
         "pelvis_p95_m": _p95(own.deviation),
-        "wider_ranges_p95_m": _p95(wider.deviation),
+        "wider_ranges_p95_m": {name: _p95(deviation) for name, deviation in wider.items()},
         "frames_over": int(over.sum()),
         **{f"over_{key}": int((over & (cause == key)).sum()) for key in CAUSES},
         "build_free_p95_m": _p95(free),
@@ -155,10 +159,11 @@ def whole_take_variant(perturbed: list[str]) -> str:
     raise PipelineError(f"'{' '.join(perturbed)}' names no perturbation (mirrored, x<tempo>)")
 
 
-def _causes(own: _Scored, wider: _Scored, on_back: np.ndarray) -> np.ndarray:
-    """(T,) per frame, the first of `CAUSES` that holds ("left" where none does)."""
+def _causes(own: _Scored, wider: list[np.ndarray], on_back: np.ndarray) -> np.ndarray:
+    """(T,) per frame, the first of `CAUSES` that holds ("left" where none does); the ranges hold
+    where any wider-ranges copy (`wider`, each (T,)) is within the bar."""
     holds = {
-        "ranges": np.abs(wider.deviation) <= BAR_M,
+        "ranges": np.any(np.abs(np.stack(wider)) <= BAR_M, axis=0),
         "body_rests": (own.deviation > 0) & (own.resting_body != ""),
         "foot_on_back": on_back,
         "lost": own.lost,
@@ -252,6 +257,10 @@ def _within_whole_take(robot: Robot, result: RetargetResult, start_s: float, fra
     return _p95(window - np.median(window))
 
 
+def _copies(report: dict) -> str:
+    return ", ".join(f"{name} {p95:.3f}" for name, p95 in report["wider_ranges_p95_m"].items())
+
+
 def _p95(deviation: np.ndarray) -> float:
     return round(float(np.percentile(np.abs(deviation), 95.0)), 3)
 
@@ -269,7 +278,7 @@ def _markdown(robot: str, reports: list[dict]) -> str:
         lines += [
             f"## {report['clip']}",
             "",
-            f"Pelvis p95 {report['pelvis_p95_m']:.3f} m (wider ranges {report['wider_ranges_p95_m']:.3f}; the same seconds "
+            f"Pelvis p95 {report['pelvis_p95_m']:.3f} m (wider ranges {_copies(report)}; the same seconds "
             f"within the whole take {report['whole_take_same_seconds_p95_m']:.3f}). {report['frames_over']} of "
             f"{report['frames']} frames over the bar: ranges {report['over_ranges']}, robot resting on its body "
             f"{report['over_body_rests']}, foot on its back {report['over_foot_on_back']}, lost {report['over_lost']}, "

@@ -11,9 +11,11 @@ counterfactual copies, and all are scored with the same ruler (`bench/retarget.p
 - `g1_legs` (H1 and H1-2 only): hip yaw, hip roll and knee ranges taken from G1 (same side, same
   joint kind). H1 turns and spreads its hips only ±0.43 rad and bends its knees to 2.05 rad.
 
-One more copy is not in this table: `build_free` takes G1's legs, widens every range 0.5 rad more
-and leaves no body but the feet any volume, so nothing of the robot's build holds it back
-(`bench/pelvis_frames.py`, `bench/retarget_variants.py --build-free`).
+Two more copies are not in this table: `free_ranges` takes G1's legs and widens every range 0.5 rad
+more (with `g1_legs` and `widened`, one of the copies `bench/retarget_variants.py` asks whether
+ranges explain a pelvis miss: `range_copies`), and `build_free` also leaves no body but the feet
+any volume, so nothing of the robot's build holds it back (`bench/pelvis_frames.py`,
+`bench/retarget_variants.py --build-free`).
 
 What a copy fixes is what the ranges cost; what it leaves is the retargeter's (or the rest of the
 robot's build, e.g. H1's single-axis ankle). A copy is not a robot: its joint-limit column is
@@ -35,6 +37,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import mujoco
+import numpy as np
 
 from bench.retarget import in_take_order, pending, resume_log, retarget_and_score, shared_takes
 from rd_pipeline import paths
@@ -119,10 +122,29 @@ def with_g1_leg_ranges(robot: Robot) -> Robot:
     return dataclasses.replace(robot, model=model)
 
 
+def free_ranges(robot: Robot) -> Robot:
+    """A copy of `robot` whose ranges hold nothing back that the bench can free: G1's leg ranges,
+    then every range `BUILD_FREE_WIDEN_RAD` wider (hip pitch and ankles too). Its build is the
+    robot's. On G1 it is `widened_ranges` by that much."""
+    return widened_ranges(with_g1_leg_ranges(robot), BUILD_FREE_WIDEN_RAD)
+
+
+def range_copies(robot: Robot) -> dict[str, Robot]:
+    """The copies of `robot` that may show its ranges explain a miss, by name: `g1_legs`,
+    `widened` (by `BUILD_FREE_WIDEN_RAD`) and both at once (`free_ranges`). Each is retargeted on
+    its own and takes its own branch through hard motion, so none stands for the others. On G1
+    (whose legs are G1's) the three are one copy, `widened`."""
+    legs = with_g1_leg_ranges(robot)
+    widened = widened_ranges(robot, BUILD_FREE_WIDEN_RAD)
+    if np.array_equal(legs.model.jnt_range, robot.model.jnt_range):
+        return {"widened": widened}
+    return {"g1_legs": legs, "widened": widened, "g1_legs_widened": free_ranges(robot)}
+
+
 def build_free(robot: Robot) -> Robot:
-    """A copy of `robot` without its build: G1's leg ranges, every range `BUILD_FREE_WIDEN_RAD`
-    wider, and every collision geom but the feet's a point at its centre."""
-    wider = widened_ranges(with_g1_leg_ranges(robot), BUILD_FREE_WIDEN_RAD)
+    """A copy of `robot` without its build: `free_ranges`, and every collision geom but the feet's
+    a point at its centre."""
+    wider = free_ranges(robot)
     model = wider.model
     feet = {robot.body_ids[body] for body in robot.config.foot_bodies}
     for geom in range(model.ngeom):
