@@ -43,10 +43,12 @@ def floor_cuts(
     min_s: float,
     length_s: float,
     count: int,
+    into: float = 0.25,
 ) -> list[tuple[float, HumanMotion]]:
     """Up to `count` clips of `length_s` cut out of the take, each starting inside a stretch where
     the `pelvis` joint stays below `low_m` for at least `min_s` (lying, sitting, crawling): the
-    longest stretches first. Returns (start second in the take, clip) pairs."""
+    longest stretches first, each cut `into` of the way through its stretch (a quarter: well past
+    the way down, so the clip opens on the floor). Returns (start second in the take, clip) pairs."""
     z = human.pos_w[:, human.names.index(pelvis), 2]
     shortest = int(round(min_s * human.fps))
     runs = [run for run in contact_runs(z < low_m) if run[1] - run[0] >= shortest]
@@ -54,8 +56,7 @@ def floor_cuts(
     frames = int(round(length_s * human.fps))
     cuts = []
     for start, end in runs[:count]:
-        # A quarter into the stretch: well past the way down, so the clip opens on the floor.
-        first = min(start + (end - start) // 4, max(human.n_frames - frames, 0))
+        first = min(start + int((end - start) * into), max(human.n_frames - frames, 0))
         cuts.append((first / human.fps, _frames(human, first, first + frames)))
     return sorted(cuts, key=lambda cut: cut[0])
 

@@ -3,7 +3,8 @@
     python -m bench.retarget_variants [--robots g1 g1_29dof h1 h1_2] [--takes ...]
                                       [--variants plain mirror tempo_1.25 tempo_0.8 floor_cut
                                                   floor_cut_mirror floor_cut_tempo_1.25 floor_cut_tempo_0.8]
-                                      [--set ik.hold_touchdowns=false] [--build-free] [--jobs 2] [--resume]
+                                      [--set ik.hold_touchdowns=false] [--build-free] [--cut-into 0.25]
+                                      [--jobs 2] [--resume]
                                       [--out bench/results/retarget_variants]
 
 The shared takes are what the retargeter was tuned on; the variants (`bench/motion_variants.py`)
@@ -11,7 +12,8 @@ are motion it has not seen: mirrored, played 1.25 times faster or 0.8 times as f
 work (pelvis below 0.5 m for at least 3 s) cut out of each take so the clip opens lying or
 crawling, and cut the same way out of the mirrored, faster and slower takes (`floor_cut_mirror`,
 `floor_cut_tempo_1.25`, `floor_cut_tempo_0.8`: two perturbations at once; the slower take's
-stretches are longer, its cuts cover other seconds). `--set` changes the retarget params
+stretches are longer, its cuts cover other seconds). Each cut starts a quarter of the way through
+its stretch; `--cut-into` starts it elsewhere, for cuts the retargeter was not developed on. `--set` changes the retarget params
 (`typed_config` names: `ik.hold_touchdowns=false`) to compare a change on the same rows. `--build-free` scores each robot's build-free copy instead
 (`bench/retarget_ranges.py`: no range or body volume holds it back), to say how much of a figure
 the robot's build costs; its penetration and self-collision columns read bodies without volume.
@@ -68,6 +70,9 @@ VARIANTS = (
 FLOOR_CUT = {"pelvis": "Hips", "low_m": 0.5, "min_s": 3.0, "length_s": 20.0, "count": 2}
 """Floor cuts: stretches where the pelvis stays below `low_m` for `min_s`, the `count` longest
 per take, each `length_s` long (`floor_cuts`)."""
+CUT_INTO = 0.25
+"""How far through its stretch a floor cut starts, unless `--cut-into` says otherwise: the cuts
+the retargeter was developed on. Another fraction cuts clips it has not seen."""
 BARS = {
     "skate_stance_mean_mm_s": 15.0,
     "penetration_max_mm": 10.0,
@@ -101,6 +106,9 @@ def main() -> None:
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=VARIANTS)
     parser.add_argument("--set", nargs="*", default=[], help="retarget params, name=value")
     parser.add_argument("--build-free", action="store_true", help="score the robots' build-free copies")
+    parser.add_argument(
+        "--cut-into", type=_fraction, default=CUT_INTO, help="how far through its stretch a floor cut starts"
+    )
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--resume", action="store_true", help="keep the rows already in <out>.jsonl")
     parser.add_argument("--out", type=Path, default=Path("bench/results/retarget_variants"))
@@ -119,7 +127,7 @@ def main() -> None:
         if (robot, take, variant) not in done
     ]
     with ProcessPoolExecutor(max_workers=args.jobs) as pool:
-        futures = [pool.submit(_rows, *job, params, args.build_free) for job in todo]
+        futures = [pool.submit(_rows, *job, params, args.build_free, args.cut_into) for job in todo]
         for future in as_completed(futures):
             for row in future.result():
                 rows.append(row)
@@ -140,6 +148,17 @@ def _overrides(items: list[str]) -> dict[str, str]:
     return dict(item.split("=", 1) for item in items)
 
 
+def _fraction(text: str) -> float:
+    """A `--cut-into` value: a number from 0 to 1; anything else stops in one line."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be a number from 0 to 1, got {text!r}")
+    return value
+
+
 def _checked_params(overrides: dict[str, str]) -> RetargetConfig:
     """The retarget params `--set` makes, checked once before any work: a bad one stops in one line."""
     try:
@@ -148,11 +167,12 @@ def _checked_params(overrides: dict[str, str]) -> RetargetConfig:
         raise SystemExit(f"--set: {exc}") from None
 
 
-def clips(take: str, variant: str) -> list[tuple[str, HumanMotion]]:
-    """The named clips one variant makes of a take (floor cuts: none, one or several)."""
+def clips(take: str, variant: str, cut_into: float = CUT_INTO) -> list[tuple[str, HumanMotion]]:
+    """The named clips one variant makes of a take (floor cuts: none, one or several, each
+    `cut_into` of the way through its stretch)."""
     if variant.startswith("floor_cut"):
         whole_name, whole = clips(take, variant.removeprefix("floor_cut").lstrip("_") or "plain")[0]
-        cuts = floor_cuts(whole, **FLOOR_CUT)
+        cuts = floor_cuts(whole, **FLOOR_CUT, into=cut_into)
         return [(f"{whole_name} {start:.0f}-{start + FLOOR_CUT['length_s']:.0f} s", clip) for start, clip in cuts]
     human = human_motion_from_bvh(read_bvh(paths.bvh_path(take)), LAFAN_CM_TO_M, LAFAN_TO_Z_UP)
     if variant == "plain":
@@ -174,12 +194,14 @@ def floor_cut(take: str, name: str, variant: str = "floor_cut") -> HumanMotion:
     return cuts[name]
 
 
-def _rows(robot_name: str, take: str, variant: str, params: RetargetConfig, without_build: bool) -> list[dict]:
+def _rows(
+    robot_name: str, take: str, variant: str, params: RetargetConfig, without_build: bool, cut_into: float
+) -> list[dict]:
     robot = load_robot(robot_name)
     if without_build:
         robot = build_free(robot)
     rows = []
-    for name, clip in clips(take, variant):
+    for name, clip in clips(take, variant, cut_into):
         result, quality, seconds = retarget_and_score(clip, robot, params)
         row = {
             "robot": robot_name,

@@ -66,3 +66,13 @@ def test_floor_cuts_open_on_the_floor(floor_take) -> None:
         assert clip.pos_w[0, hips, 2] < 0.5
         first = round(start_s * floor_take.fps)
         np.testing.assert_array_equal(clip.pos_w[0], floor_take.pos_w[first])
+
+
+def test_a_cut_further_into_its_stretch_starts_later_and_still_on_the_floor(floor_take) -> None:
+    cut = {"pelvis": "Hips", "low_m": 0.5, "min_s": 3.0, "length_s": 20.0, "count": 2}
+    early = floor_cuts(floor_take, **cut)
+    late = floor_cuts(floor_take, **cut, into=0.75)
+    hips = floor_take.names.index("Hips")
+    for (early_s, _), (late_s, clip) in zip(early, late, strict=True):
+        assert 3.0 < late_s - early_s < 20.0
+        assert clip.pos_w[0, hips, 2] < 0.5
