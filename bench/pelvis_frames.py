@@ -117,8 +117,8 @@ def _report(robot: Robot, name: str) -> dict:
     own_result = retarget(clip, robot, RetargetConfig())
     own = _scored(robot, own_result)
     wider = {
-        name: pelvis_deviation(copy, retarget(clip, copy, RetargetConfig()))
-        for name, copy in range_copies(robot).items()
+        copy_name: pelvis_deviation(copy, retarget(clip, copy, RetargetConfig()))
+        for copy_name, copy in range_copies(robot).items()
     }
     free_robot = build_free(robot)
     free = pelvis_deviation(free_robot, retarget(clip, free_robot, RetargetConfig()))
@@ -136,7 +136,7 @@ def _report(robot: Robot, name: str) -> dict:
         "clip": name,
         "frames": len(over),
         "pelvis_p95_m": _p95(own.deviation),
-        "wider_ranges_p95_m": {name: _p95(deviation) for name, deviation in wider.items()},
+        "wider_ranges_p95_m": {copy_name: _p95(deviation) for copy_name, deviation in wider.items()},
         "frames_over": int(over.sum()),
         **{f"over_{key}": int((over & (cause == key)).sum()) for key in CAUSES},
         "build_free_p95_m": _p95(free),
