@@ -242,8 +242,9 @@ def excused_p95(own: np.ndarray, copies: list[np.ndarray]) -> float:
     the bar (its median offset moves)."""
     bar = BARS["pelvis_height_dev_p95_m"]
     read = np.abs(own)
+    over = read > bar
     for wider in copies:
-        explained = (np.abs(own) > bar) & (np.abs(wider) <= bar)
+        explained = over & (np.abs(wider) <= bar)
         read = np.where(explained, np.minimum(read, np.abs(wider)), read)
     return round(float(np.percentile(read, 95.0)), 3)
 
